@@ -1,0 +1,152 @@
+"""The command line: parses arguments, calls the pipeline, reads and writes files. Nothing else.
+
+Errors the user can cause are printed as one line on stderr with exit code 2, never a traceback.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+from .errors import CpapfitError, NotAvailableError
+from .io import load_scan
+from .io.phantom import write_phantom
+from .io.write import png_bytes, write_bytes
+from .phantom import make_phantom
+from .pipeline import missing_stages, stage_table
+from .report.pictures import template_regions_picture
+from .scan import Scan
+from .template import load_template
+
+EXIT_USER_ERROR = 2
+
+
+def info(message: str) -> None:
+    """A line of progress or decision for the user, on stderr."""
+    print(message, file=sys.stderr)
+
+
+def scan_summary(scan: Scan) -> str:
+    """One line describing a loaded scan."""
+    kind = (
+        f"RGB-D capture {scan.intrinsics.width}x{scan.intrinsics.height}, {int(scan.valid.sum())} valid depth pixels"
+        if scan.is_capture else ("point cloud" if scan.is_point_cloud else "mesh")
+    )
+    size = scan.vertices.max(axis=0) - scan.vertices.min(axis=0)
+    return (
+        f"{kind}: {len(scan.vertices)} vertices, {len(scan.faces)} triangles, "
+        f"{size[0]:.0f} x {size[1]:.0f} x {size[2]:.0f} mm"
+    )
+
+
+def template_summary() -> str:
+    """One line describing the template and its contact regions."""
+    t = load_template()
+    bands = ", ".join(f"{name} band {len(r.band)} vertices" for name, r in t.regions.items())
+    return f"{len(t.vertices)} vertices, {len(t.faces)} triangles; {bands}"
+
+
+def cmd_demo(args) -> int:
+    out = Path(args.out)
+    subject = out / "subject"
+    info(f"cpapfit demo: synthetic subject (seed {args.seed}) -> {subject}")
+    write_phantom(make_phantom(args.seed), subject)
+    scan = load_scan(subject)
+    write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
+    summaries = {"scan": scan_summary(scan), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
+    for stage in stage_table(summaries):
+        print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
+    print(f"stages not built yet: {', '.join(missing_stages())}; no cushion is designed yet.")
+    return 0
+
+
+def cmd_phantom(args) -> int:
+    files = write_phantom(make_phantom(args.seed), Path(args.out))
+    info(f"wrote synthetic subject seed {args.seed}: {len(files)} files in {args.out}")
+    return 0
+
+
+def cmd_inspect(args) -> int:
+    scan = load_scan(Path(args.scan), args.units)
+    info(scan.units_note)
+    print(f"{args.scan}: {scan_summary(scan)}")
+    return 0
+
+
+def not_available(command: str):
+    """A command handler for a stage not built yet: validates the scan, then says so plainly."""
+
+    def handler(args) -> int:
+        if getattr(args, "scan", None):
+            scan = load_scan(Path(args.scan), getattr(args, "units", "auto"))
+            info(f"{scan.units_note}; {scan_summary(scan)}")
+        raise NotAvailableError(
+            f"cpapfit {command}: not available yet (stages not built: {', '.join(missing_stages())}); no output written"
+        )
+
+    return handler
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="cpapfit", description="A personalised CPAP mask cushion from a facial depth scan.")
+    ap.add_argument("--version", action="version", version=f"cpapfit {__version__}")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("demo", help="run every built stage on a synthetic subject (no input needed)")
+    p.add_argument("--out", default="cpapfit-demo", help="output folder (default: ./cpapfit-demo)")
+    p.add_argument("--seed", type=int, default=0, help="synthetic subject seed (default 0)")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("phantom", help="write a synthetic RGB-D subject with ground truth")
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--out", required=True, help="output capture folder")
+    p.set_defaults(func=cmd_phantom)
+
+    scan_help = "mesh file (PLY, OBJ, STL, OFF, GLB) or RGB-D capture folder"
+    units_help = "units of a mesh scan (default auto: decided from the size of the face)"
+    p = sub.add_parser("inspect", help="read a scan and say what cpapfit sees in it (units, size, valid depth)")
+    p.add_argument("scan", help=scan_help)
+    p.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m"], help=units_help)
+    p.set_defaults(func=cmd_inspect)
+
+    for name, helptext, out_help in (
+        ("design", "design the custom cushion and its files", "output folder"),
+        ("register", "warp the template onto the scan", "registered_template.ply"),
+        ("landmarks", "find the facial landmarks in 3-D", "landmarks.json"),
+        ("evaluate", "evaluate a cushion's fit on a scan", "fit.json"),
+    ):
+        p = sub.add_parser(name, help=helptext)
+        p.add_argument("scan", help=scan_help)
+        p.add_argument("--out", required=True, help=out_help)
+        p.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m"], help=units_help)
+        if name in ("design", "register"):
+            p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
+        if name == "design":
+            p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
+        if name == "evaluate":
+            p.add_argument("--cushion", required=True, help="cushion.stl")
+            p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
+        p.set_defaults(func=not_available(name))
+
+    p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
+    p.add_argument("input_dir")
+    p.add_argument("--out", required=True)
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler")
+    p.set_defaults(func=not_available("batch"))
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except CpapfitError as exc:
+        print(f"cpapfit: error: {exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("cpapfit: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

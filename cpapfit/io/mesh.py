@@ -1,0 +1,117 @@
+"""Mesh scans in: PLY, OBJ (with texture), STL, OFF, GLB, as trimesh reads them."""
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from ..errors import InputError
+from ..scan import Scan
+from .units import MM_PER_UNIT, decide_units
+
+MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
+MIN_VERTICES = 100
+NORMAL_NEIGHBOURS = 16
+
+
+def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
+    """Read a mesh or point-cloud file into a `Scan` in millimetres (the file's own frame)."""
+    geom = _read(path)
+    vertices = np.asarray(geom.vertices, dtype=np.float64)
+    faces = np.asarray(getattr(geom, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    _check(path, vertices, faces)
+    unit, note = decide_units(vertices, units)
+    vertices = vertices * MM_PER_UNIT[unit]
+    normals = _mesh_normals(vertices, faces) if len(faces) else _cloud_normals(vertices)
+    colors, texture, uv = _appearance(geom, len(vertices))
+    return Scan(
+        vertices=vertices, faces=faces, normals=normals, source=str(path), units=unit, units_note=note,
+        colors=colors, texture=texture, uv=uv,
+    )
+
+
+def _read(path: Path):
+    """One trimesh geometry (Trimesh or PointCloud) from a file, or an InputError."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: the file is empty")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise InputError(f"{path}: not a mesh file ({', '.join(MESH_SUFFIXES)}) nor an RGB-D capture folder")
+    if path.suffix.lower() == ".obj":
+        _check_obj_tail(path)
+    try:
+        loaded = trimesh.load(path, process=False)
+    except Exception as exc:  # any parser failure on a user's file is a bad file
+        raise InputError(
+            f"{path}: not a readable {path.suffix.lstrip('.').upper()} mesh ({type(exc).__name__}: {exc}); "
+            "is the file complete and of that format?"
+        ) from None
+    if isinstance(loaded, trimesh.Scene):
+        geoms = [g for g in loaded.dump() if hasattr(g, "vertices")] if loaded.geometry else []
+        if not geoms:
+            raise InputError(f"{path}: the file holds no mesh")
+        loaded = trimesh.util.concatenate(geoms) if len(geoms) > 1 else geoms[0]
+    return loaded
+
+
+# OBJ statements and the fewest fields each needs; an OBJ (no counts in a header) cut short
+# usually ends in the middle of one.
+OBJ_FIELDS = {"v": 3, "vt": 2, "vn": 3, "f": 3, "l": 2}
+
+
+def _check_obj_tail(path: Path) -> None:
+    """Refuse an OBJ whose last statement is incomplete (a truncated upload)."""
+    with open(path, "rb") as fh:
+        fh.seek(max(0, path.stat().st_size - 4096))
+        lines = fh.read().decode("latin-1").strip().splitlines()
+    fields = lines[-1].split() if lines else []
+    need = OBJ_FIELDS.get(fields[0], 0) if fields else 0
+    if len(fields) - 1 < need or (fields[0] == "f" and fields[-1].endswith("/")):
+        raise InputError(f"{path}: the last line '{lines[-1][:40]}' is cut short; the file is truncated")
+
+
+def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Refuse meshes no stage can use: too few points, NaN/Inf, faces pointing nowhere."""
+    if len(vertices) < MIN_VERTICES:
+        raise InputError(f"{path}: only {len(vertices)} vertices; a face scan has thousands (is the file truncated?)")
+    if not np.isfinite(vertices).all():
+        bad = int((~np.isfinite(vertices)).any(axis=1).sum())
+        raise InputError(f"{path}: {bad} vertices are NaN or infinite; repair or re-export the scan")
+    if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise InputError(f"{path}: triangles refer to vertices that do not exist; the file is corrupt")
+
+
+def _mesh_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(N, 3) area-weighted unit vertex normals following the file's winding."""
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    return np.array(mesh.vertex_normals, dtype=np.float64)
+
+
+def _cloud_normals(vertices: np.ndarray) -> np.ndarray:
+    """(N, 3) unit normals of a point cloud by local PCA, oriented away from the centroid."""
+    _, idx = cKDTree(vertices).query(vertices, k=NORMAL_NEIGHBOURS, workers=-1)
+    nbrs = vertices[idx] - vertices[idx].mean(axis=1, keepdims=True)
+    _, _, vt = np.linalg.svd(nbrs, full_matrices=False)
+    normals = vt[:, -1, :]
+    flip = np.einsum("ij,ij->i", normals, vertices - vertices.mean(axis=0)) < 0
+    normals[flip] *= -1
+    return normals
+
+
+def _appearance(geom, n: int):
+    """(colors, texture, uv): per-vertex colour, or texture image and coordinates, if the file has them."""
+    if isinstance(geom, trimesh.PointCloud):
+        colors = np.asarray(geom.colors)
+        return (colors[:, :3].astype(np.uint8) if len(colors) == n else None), None, None
+    visual = getattr(geom, "visual", None)
+    kind = getattr(visual, "kind", None)
+    if kind == "vertex":
+        return np.asarray(visual.vertex_colors)[:, :3].astype(np.uint8), None, None
+    if kind == "texture" and visual.uv is not None and len(visual.uv) == n:
+        image = getattr(visual.material, "image", None) or getattr(visual.material, "baseColorTexture", None)
+        if image is not None:
+            return None, np.asarray(image.convert("RGB")), np.asarray(visual.uv, dtype=np.float64)
+    return None, None, None

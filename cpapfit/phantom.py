@@ -1,0 +1,226 @@
+"""Synthetic subjects with ground truth: a face that is not the template, seen by a depth camera.
+
+`make_phantom(seed)` changes the template's identity smoothly (nose, cheeks, face size, chin and
+low-frequency bumps), poses the head in front of a virtual 640x480 depth camera at 350-700 mm,
+and renders a shaded colour image and a depth image with realistic sensor effects. The truth is
+the subject's surface in the template's vertex order, in the camera frame (mm), so the true
+position of every template vertex (landmarks, contact regions) is known.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib.path import Path as Polygon
+from scipy.spatial import ConvexHull
+from scipy.spatial.transform import Rotation
+
+from .frozen import freeze_arrays
+from .render import Hits, raycast, shade
+from .scan import Intrinsics
+from .template import N_LANDMARKS, Template, load_template
+
+TEMPLATE_TO_CAMERA = np.diag([1.0, -1.0, -1.0])  # a face looking at the camera: y up -> down, z out -> towards it
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Depth sensor effects. Noise sigma(z) = noise_mm_at_500 * (z / 500 mm)^2 (structured light /
+    stereo); depth is quantised in disparity (stereo baseline, sub-pixel step) and in depth units;
+    returns fade out between grazing_start_deg and grazing_stop_deg of incidence; a few random
+    elliptic holes (mean count holes_mean, radius 2-10 px) are dropped."""
+
+    noise_mm_at_500: float = 0.25
+    baseline_mm: float = 50.0
+    disparity_step_px: float = 1.0 / 32.0
+    depth_scale: float = 10000.0  # depth units per metre: 0.1 mm
+    grazing_start_deg: float = 65.0
+    grazing_stop_deg: float = 80.0
+    holes_mean: float = 3.0
+
+    def sigma_mm(self, z_mm: np.ndarray) -> np.ndarray:
+        """Standard deviation (mm) of the depth noise at depth z (mm)."""
+        return self.noise_mm_at_500 * (np.asarray(z_mm) / 500.0) ** 2
+
+    def disparity_step_mm(self, z_mm: np.ndarray, f_px: float) -> np.ndarray:
+        """Depth step (mm) of one disparity quantum at depth z (mm) for focal length f (px)."""
+        return np.asarray(z_mm) ** 2 / (f_px * self.baseline_mm) * self.disparity_step_px
+
+
+@dataclass(frozen=True)
+class Phantom:
+    """A synthetic RGB-D capture and its truth.
+
+    image: (H, W, 3) uint8 colour; depth_raw: (H, W) uint16 in units of 1/depth_scale m, 0 = invalid.
+    surface: (N, 3) float64 mm, the subject's surface in the template's vertex order, camera frame.
+    faces: (M, 3) int64 template triangles. identity, pose: the random parameters (for the record).
+    """
+
+    seed: int
+    image: np.ndarray
+    depth_raw: np.ndarray
+    intrinsics: Intrinsics
+    sensor: SensorModel
+    surface: np.ndarray
+    faces: np.ndarray
+    identity: dict
+    pose: dict
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    @property
+    def landmarks(self) -> np.ndarray:
+        """(468, 3) mm true landmark positions, camera frame."""
+        return self.surface[:N_LANDMARKS]
+
+
+def make_phantom(seed: int, sensor: SensorModel = SensorModel()) -> Phantom:
+    """The synthetic subject of `seed`: same seed, same arrays, bit for bit."""
+    rng = np.random.default_rng(seed)
+    template = load_template()
+    identity = random_identity(rng)
+    face = apply_identity(template, identity)
+    intrinsics = random_intrinsics(rng)
+    surface, pose = place_in_view(face, template, intrinsics, rng)
+    hits = raycast(surface, template.faces, intrinsics)
+    image = colour_image(hits, surface, template, rng)
+    depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
+    return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, pose)
+
+
+def random_identity(rng: np.random.Generator) -> dict:
+    """Random identity parameters (dimensionless scales, mm offsets) within adult variation."""
+    u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731
+    return {
+        "scale": u(0.9, 1.1), "face_width": u(0.92, 1.08), "face_height": u(0.92, 1.08),
+        "nose_length": u(0.85, 1.15), "nose_width": u(0.85, 1.2), "nose_projection_mm": u(-3.0, 4.0),
+        "cheek_fullness_mm": u(-2.5, 3.5), "chin_forward_mm": u(-4.0, 4.0), "chin_down_mm": u(-4.0, 4.0),
+        "bumps": [[u(-60, 60), u(-80, 40), u(-1.5, 1.5), u(12, 25)] for _ in range(6)],
+    }
+
+
+def _gauss(points: np.ndarray, centre: np.ndarray, sigma: float) -> np.ndarray:
+    """(N,) Gaussian weights of (N, 3) points around a centre (all mm)."""
+    return np.exp(-np.sum((points - centre) ** 2, axis=1) / (2.0 * sigma**2))
+
+
+def apply_identity(template: Template, p: dict) -> np.ndarray:
+    """(N, 3) mm vertices of the template changed by identity parameters `p` (template frame)."""
+    v = template.vertices.copy()
+    lm = template.landmarks
+    root, tip = lm[6], lm[4]
+    w_nose = _gauss(v, (root + tip) / 2.0, 16.0)
+    v[:, 1] += (p["nose_length"] - 1.0) * (v[:, 1] - root[1]) * w_nose
+    v[:, 0] += (p["nose_width"] - 1.0) * (v[:, 0] - tip[0]) * _gauss(v, tip + [0, -5, -8], 12.0)
+    v[:, 2] += p["nose_projection_mm"] * _gauss(v, tip, 11.0)
+    normals = template.mesh().vertex_normals
+    for side in (50, 280):
+        v += p["cheek_fullness_mm"] * _gauss(template.vertices, lm[side], 16.0)[:, None] * normals
+    w_chin = _gauss(v, lm[152] + [0, 10, 0], 22.0)
+    v[:, 2] += p["chin_forward_mm"] * w_chin
+    v[:, 1] -= p["chin_down_mm"] * w_chin
+    for x, y, amp, sigma in p["bumps"]:
+        v += amp * _gauss(template.vertices, np.array([x, y, lm[4, 2] - 30.0]), sigma)[:, None] * normals
+    centre = lm[168]
+    scale = p["scale"] * np.array([p["face_width"], p["face_height"], 1.0])
+    return (v - centre) * scale + centre
+
+
+def random_intrinsics(rng: np.random.Generator) -> Intrinsics:
+    """640x480 intrinsics of a typical depth camera (f ~ 580-620 px, principal point near centre)."""
+    f = float(rng.uniform(580.0, 620.0))
+    return Intrinsics(640, 480, f, f, float(319.5 + rng.uniform(-6, 6)), float(239.5 + rng.uniform(-6, 6)))
+
+
+def place_in_view(face: np.ndarray, template: Template, intr: Intrinsics, rng: np.random.Generator):
+    """Pose the face (yaw/pitch +-25 deg, roll +-15 deg) at 350-700 mm, wholly inside the image.
+
+    Returns (surface (N, 3) mm camera frame, pose dict)."""
+    yaw, pitch, roll = rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(-15, 15)
+    head = Rotation.from_euler("yxz", [yaw, pitch, roll], degrees=True).as_matrix()
+    rotation = TEMPLATE_TO_CAMERA @ head
+    distance = float(rng.uniform(350.0, 700.0))
+    centre = template.landmarks[[6, 4, 152, 33, 263]].mean(axis=0)
+    local = (face - centre) @ rotation.T
+    uv = local[:, :2] / (local[:, 2:] + distance) * [intr.fx, intr.fy]  # pixel offsets from the principal point
+    margin = 8.0
+    lo = -np.array([intr.cx, intr.cy]) + margin - uv.min(axis=0)
+    hi = np.array([intr.width - 1 - intr.cx, intr.height - 1 - intr.cy]) - margin - uv.max(axis=0)
+    shift_px = rng.uniform(np.minimum(lo, hi), np.maximum(lo, hi)) if (hi >= lo).all() else np.zeros(2)
+    translation = np.array([*(shift_px * distance / np.array([intr.fx, intr.fy])), distance])
+    pose = {
+        "yaw_deg": float(yaw), "pitch_deg": float(pitch), "roll_deg": float(roll), "distance_mm": distance,
+        "rotation": rotation.tolist(), "translation_mm": translation.tolist(), "template_centre_mm": centre.tolist(),
+    }
+    return local + translation, pose
+
+
+def skin_albedo(template: Template, rng: np.random.Generator) -> np.ndarray:
+    """(N, 3) albedo in [0, 1]: a random skin tone, redder lips, dark brows, eyes with irises."""
+    v = template.vertices
+    tone = rng.uniform(0.0, 1.0)
+    skin = (1 - tone) * np.array([0.92, 0.74, 0.64]) + tone * np.array([0.45, 0.30, 0.22])
+    albedo = np.tile(skin, (len(v), 1))
+    albedo[_inside(template, "lips")] = skin * np.array([0.85, 0.55, 0.55])
+    for brow in ("left_eyebrow", "right_eyebrow"):
+        albedo[_near_edges(template, brow, 4.0)] = skin * 0.35
+    for eye in ("left_eye", "right_eye"):
+        inside = _inside(template, eye)
+        iris = np.linalg.norm(v[:, :2] - template.landmarks[template.features[eye].ravel(), :2].mean(axis=0), axis=1) < 5.5
+        albedo[inside] = [0.9, 0.9, 0.88]
+        albedo[inside & iris] = [0.25, 0.16, 0.1]
+    return albedo
+
+
+def _inside(template: Template, feature: str) -> np.ndarray:
+    """(N,) bool: vertices inside the frontal (x, y) convex hull of a feature's landmarks."""
+    pts = template.landmarks[np.unique(template.features[feature]), :2]
+    hull = Polygon(pts[ConvexHull(pts).vertices])
+    return hull.contains_points(template.vertices[:, :2])
+
+
+def _near_edges(template: Template, feature: str, radius: float) -> np.ndarray:
+    """(N,) bool: vertices within `radius` mm (frontal x, y) of a feature's landmark edges."""
+    p = template.vertices[:, None, :2]
+    a, b = (template.landmarks[template.features[feature][:, k], :2][None] for k in (0, 1))
+    t = np.clip(np.sum((p - a) * (b - a), -1) / np.sum((b - a) ** 2, -1), 0.0, 1.0)
+    return (np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=-1) < radius).any(axis=1)
+
+
+def colour_image(hits: Hits, surface: np.ndarray, template: Template, rng: np.random.Generator) -> np.ndarray:
+    """(H, W, 3) uint8 shaded colour image with a random light and mild sensor noise."""
+    light = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.6, 0.1), -1.0])
+    background = rng.uniform(0.35, 0.75) * np.array([1.0, 1.02, 1.06])
+    image = shade(hits, surface, template.faces, skin_albedo(template, rng), light=light, background=background)
+    noisy = image.astype(np.float64) + rng.normal(0.0, 2.0, image.shape)
+    return np.clip(np.round(noisy), 0, 255).astype(np.uint8)
+
+
+def sensor_depth(hits: Hits, intr: Intrinsics, sensor: SensorModel, rng: np.random.Generator) -> np.ndarray:
+    """(H, W) uint16 raw depth: noise, disparity and unit quantisation, grazing dropout, holes."""
+    z = np.where(hits.hit, hits.depth, 0.0)
+    noisy = z + rng.normal(0.0, 1.0, z.shape) * sensor.sigma_mm(z)
+    fb = intr.fx * sensor.baseline_mm
+    with np.errstate(divide="ignore"):
+        disparity = np.round(fb / noisy / sensor.disparity_step_px) * sensor.disparity_step_px
+        quantised = np.where(hits.hit, fb / disparity, 0.0)
+    angle = np.degrees(np.arccos(np.clip(hits.cos_incidence, 0.0, 1.0)))
+    keep_p = np.clip((sensor.grazing_stop_deg - angle) / (sensor.grazing_stop_deg - sensor.grazing_start_deg), 0, 1)
+    keep = hits.hit & (rng.uniform(size=z.shape) < keep_p) & ~random_holes(hits.hit, sensor.holes_mean, rng)
+    raw = np.round(quantised * sensor.depth_scale / 1000.0)
+    return np.where(keep, np.clip(raw, 1, 65534), 0).astype(np.uint16)
+
+
+def random_holes(on_face: np.ndarray, mean_count: float, rng: np.random.Generator) -> np.ndarray:
+    """(H, W) bool mask of a Poisson number of random ellipses (2-10 px radii) centred on the face."""
+    holes = np.zeros(on_face.shape, dtype=bool)
+    rows, cols = np.nonzero(on_face)
+    vv, uu = np.mgrid[: on_face.shape[0], : on_face.shape[1]]
+    for _ in range(rng.poisson(mean_count)):
+        k = rng.integers(len(rows))
+        ru, rv, theta = rng.uniform(2, 10), rng.uniform(2, 10), rng.uniform(0, np.pi)
+        du, dv = uu - cols[k], vv - rows[k]
+        a = du * np.cos(theta) + dv * np.sin(theta)
+        b = -du * np.sin(theta) + dv * np.cos(theta)
+        holes |= (a / ru) ** 2 + (b / rv) ** 2 <= 1.0
+    return holes

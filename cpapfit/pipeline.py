@@ -1,0 +1,32 @@
+"""The stages strung together. Each stage is a pure function; this module only sequences them."""
+
+from dataclasses import dataclass
+
+# (stage, issue that builds it); order is the pipeline's.
+STAGES = (
+    ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
+    ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
+)
+BUILT = {"scan", "template"}
+
+
+@dataclass(frozen=True)
+class StageStatus:
+    """Whether a pipeline stage is built, and what it did on the last run (one line)."""
+
+    name: str
+    built: bool
+    summary: str
+
+
+def missing_stages() -> list[str]:
+    """Names of the stages not built yet, in pipeline order."""
+    return [name for name, _ in STAGES if name not in BUILT]
+
+
+def stage_table(summaries: dict[str, str]) -> list[StageStatus]:
+    """Every stage in order with its summary, or "not built yet (issue N)"."""
+    return [
+        StageStatus(name, name in BUILT, summaries.get(name, "") if name in BUILT else f"not built yet (issue {issue})")
+        for name, issue in STAGES
+    ]

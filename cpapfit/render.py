@@ -1,0 +1,106 @@
+"""Ray-cast rendering of a mesh through a pinhole camera: exact depth and simple shading.
+
+Used for synthetic subjects (depth and colour images) and for pictures. Camera frame is
+OpenCV's (x right, y down, z forward), mm. Embree finds the first triangle hit by each pixel's
+ray; the hit point is then recomputed exactly in float64.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+from .frozen import freeze_arrays
+from .rgbd import pixel_rays
+from .scan import Intrinsics
+
+
+@dataclass(frozen=True)
+class Hits:
+    """Where each pixel's ray meets the mesh.
+
+    triangle: (H, W) int64 index of the triangle hit, -1 where the ray misses.
+    bary: (H, W, 3) float64 barycentric coordinates of the hit in that triangle.
+    depth: (H, W) float64 z of the hit in mm, NaN where the ray misses.
+    cos_incidence: (H, W) float64 |cos| of the angle between the ray and the triangle normal.
+    """
+
+    triangle: np.ndarray
+    bary: np.ndarray
+    depth: np.ndarray
+    cos_incidence: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    @property
+    def hit(self) -> np.ndarray:
+        """(H, W) bool: the ray meets the mesh."""
+        return self.triangle >= 0
+
+
+def raycast(vertices: np.ndarray, faces: np.ndarray, intrinsics: Intrinsics) -> Hits:
+    """Cast one ray per pixel centre from the camera origin onto an (N, 3) mm camera-frame mesh."""
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    rays = pixel_rays(intrinsics).reshape(-1, 3)
+    dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+    tri = RayMeshIntersector(mesh).intersects_first(np.zeros_like(dirs), dirs).astype(np.int64)
+    shape = (intrinsics.height, intrinsics.width)
+    bary = np.zeros((len(rays), 3))
+    depth = np.full(len(rays), np.nan)
+    cos = np.zeros(len(rays))
+    hit = tri >= 0
+    a, b, c = (vertices[faces[tri[hit], k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    r = rays[hit]
+    t = np.einsum("ij,ij->i", normal, a) / np.einsum("ij,ij->i", normal, r)  # ray p = t * r, r_z = 1
+    p = r * t[:, None]
+    bary[hit] = _barycentric(p, a, b, c)
+    depth[hit] = t
+    cos[hit] = np.abs(np.einsum("ij,ij->i", normal, dirs[hit]))
+    return Hits(tri.reshape(shape), bary.reshape(*shape, 3), depth.reshape(shape), cos.reshape(shape))
+
+
+def _barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(K, 3) barycentric coordinates of points p in triangles (a, b, c), all (K, 3)."""
+    v0, v1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((v0, v0), (v0, v1), (v1, v1)))
+    d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
+    den = d00 * d11 - d01 * d01
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    return np.stack([1.0 - v - w, v, w], axis=1)
+
+
+def interpolate(hits: Hits, faces: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(H, W, C) per-vertex (N, C) values interpolated at each hit; zeros where rays miss."""
+    out = np.zeros((*hits.triangle.shape, values.shape[1]))
+    hit = hits.hit
+    corners = values[faces[hits.triangle[hit]]]  # (K, 3, C)
+    out[hit] = np.einsum("kj,kjc->kc", hits.bary[hit], corners)
+    return out
+
+
+def shade(
+    hits: Hits,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    albedo: np.ndarray,
+    light: np.ndarray = np.array([-0.3, -0.4, -1.0]),
+    ambient: float = 0.35,
+    background: np.ndarray = np.array([0.55, 0.58, 0.62]),
+) -> np.ndarray:
+    """(H, W, 3) uint8 Lambert-shaded image of a mesh with per-vertex albedo (N, 3) in [0, 1].
+
+    `light` is the direction from the surface towards the light in the camera frame.
+    """
+    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    n = interpolate(hits, faces, np.asarray(normals))
+    n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+    to_light = light / np.linalg.norm(light)
+    lambert = np.clip(np.abs(n @ to_light), 0.0, 1.0)  # two-sided: winding does not matter
+    rgb = interpolate(hits, faces, albedo) * (ambient + (1.0 - ambient) * lambert)[..., None]
+    rgb[~hits.hit] = background
+    return np.clip(np.round(rgb * 255.0), 0, 255).astype(np.uint8)

@@ -1,0 +1,63 @@
+"""Depth images as geometry: back-projection, projection and grid triangulation (camera frame, mm).
+
+Camera frame is OpenCV's: x right, y down, z forward; pixel (u, v) has its centre at integer
+coordinates, u along columns, v along rows.
+"""
+
+import numpy as np
+
+from .scan import Intrinsics
+
+# A triangle is dropped when its depth range exceeds what a surface at this grazing angle to the
+# viewing ray could produce across one pixel diagonal: a depth jump, not a surface.
+MAX_SURFACE_ANGLE_DEG = 85.0
+
+
+def backproject(depth_mm: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """(H, W, 3) camera-frame points (mm) of an (H, W) depth image; NaN depth gives NaN points."""
+    h, w = depth_mm.shape
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    x = (u - intrinsics.cx) / intrinsics.fx * depth_mm
+    y = (v - intrinsics.cy) / intrinsics.fy * depth_mm
+    return np.stack([x, y, depth_mm], axis=-1)
+
+
+def project(points: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """(N, 2) pixel coordinates (u, v) of (N, 3) camera-frame points (mm) in front of the camera."""
+    z = points[:, 2]
+    return np.stack(
+        [intrinsics.fx * points[:, 0] / z + intrinsics.cx, intrinsics.fy * points[:, 1] / z + intrinsics.cy],
+        axis=1,
+    )
+
+
+def pixel_rays(intrinsics: Intrinsics) -> np.ndarray:
+    """(H, W, 3) viewing directions through every pixel centre, with z = 1."""
+    ones = np.ones((intrinsics.height, intrinsics.width))
+    return backproject(ones, intrinsics)
+
+
+def grid_triangles(depth_mm: np.ndarray, valid: np.ndarray, intrinsics: Intrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate the valid pixels of a depth image.
+
+    Returns (pixel_vertex, faces): pixel_vertex (H, W) int64 maps each valid pixel to its vertex
+    index (row-major order of valid pixels) and -1 elsewhere; faces (M, 3) int64, two per 2x2
+    block of valid pixels, wound so normals face the camera. Triangles spanning a depth jump
+    (depth range > tan(85 deg) x one pixel diagonal's footprint) are left out.
+    """
+    pixel_vertex = np.full(depth_mm.shape, -1, dtype=np.int64)
+    pixel_vertex[valid] = np.arange(int(valid.sum()))
+    a, b = pixel_vertex[:-1, :-1], pixel_vertex[:-1, 1:]
+    c, d = pixel_vertex[1:, :-1], pixel_vertex[1:, 1:]
+    za, zb = depth_mm[:-1, :-1], depth_mm[:-1, 1:]
+    zc, zd = depth_mm[1:, :-1], depth_mm[1:, 1:]
+    f = min(intrinsics.fx, intrinsics.fy)
+    slope = np.tan(np.radians(MAX_SURFACE_ANGLE_DEG)) * np.sqrt(2.0) / f
+    faces = []
+    for tri, zs in (((a, c, b), (za, zc, zb)), ((b, c, d), (zb, zc, zd))):
+        idx = np.stack(tri, axis=-1)
+        z = np.stack(zs, axis=-1)
+        with np.errstate(invalid="ignore"):
+            keep = (idx >= 0).all(-1) & (np.ptp(z, axis=-1) <= slope * z.min(axis=-1))
+        faces.append(idx[keep])
+    return pixel_vertex, np.concatenate(faces).astype(np.int64)

@@ -1,0 +1,73 @@
+"""The `Scan` type every stage reads: a face surface in millimetres, with what the sensor gave."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frozen import freeze_arrays
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole camera intrinsics (pixels) of a `width` x `height` image, OpenCV convention."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The 3x3 camera matrix K."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class Scan:
+    """A facial scan in millimetres.
+
+    vertices: (N, 3) float64 mm, in the scan's own frame (camera frame x right, y down,
+        z forward for RGB-D captures).
+    faces: (M, 3) int64 triangles; (0, 3) for a point cloud.
+    normals: (N, 3) float64 unit vertex normals (towards the sensor for RGB-D).
+    colors: (N, 3) uint8 per-vertex colour, or None.
+    texture, uv: (H, W, 3) uint8 texture image and (N, 2) float64 texture coordinates, or None.
+    image: (H, W, 3) uint8 colour image registered to the depth image, or None.
+    depth: (H, W) float64 depth in mm, NaN where invalid, or None.
+    valid: (H, W) bool mask of valid depth pixels, or None.
+    pixel_vertex: (H, W) int64 index of the vertex of each valid pixel, -1 elsewhere, or None.
+    intrinsics: camera intrinsics of image and depth, or None.
+    source: the path the scan was read from.
+    units: the unit the input was in ("mm", "cm" or "m").
+    units_note: how that unit was decided, in words.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    source: str = ""
+    units: str = "mm"
+    units_note: str = ""
+    colors: np.ndarray | None = None
+    texture: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    image: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    valid: np.ndarray | None = None
+    pixel_vertex: np.ndarray | None = None
+    intrinsics: Intrinsics | None = None
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    @property
+    def is_point_cloud(self) -> bool:
+        """True when the scan has no triangles."""
+        return len(self.faces) == 0
+
+    @property
+    def is_capture(self) -> bool:
+        """True when the scan came from a depth image (grid correspondences possible)."""
+        return self.depth is not None

@@ -1,0 +1,69 @@
+"""The template face: MediaPipe's canonical face, refined, in mm, with the mask contact regions.
+
+Frame: x to the subject's left (image right), y up, z out of the face; millimetres. Vertex
+i < 468 of the refined template is MediaPipe Face Mesh landmark i.
+"""
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+
+import numpy as np
+import trimesh
+
+from ..frozen import freeze_arrays
+from .regions import ContactRegion, contact_region
+
+N_LANDMARKS = 468
+SUBDIVISIONS = 3  # Loop subdivision rounds: 468 -> 28 881 vertices
+MASKS = ("nasal", "oronasal")
+
+
+@dataclass(frozen=True)
+class Template:
+    """The refined template face.
+
+    vertices: (N, 3) float64 mm; faces: (M, 3) int64; vertex i < N_LANDMARKS is landmark i.
+    regions: {"nasal" | "oronasal": ContactRegion}.
+    features: {"lips" | "left_eye" | ...: (E, 2) int64 landmark edges} (MediaPipe's connections).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    regions: dict
+    features: dict
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    @property
+    def landmarks(self) -> np.ndarray:
+        """(468, 3) mm landmark positions on the template."""
+        return self.vertices[:N_LANDMARKS]
+
+    def mesh(self) -> trimesh.Trimesh:
+        """The template as a trimesh (vertex order kept)."""
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+
+def _data(name: str) -> dict:
+    return json.loads(resources.files(__package__).joinpath("data", name).read_text())
+
+
+def canonical_face() -> tuple[np.ndarray, np.ndarray]:
+    """MediaPipe's canonical face: (468, 3) float64 vertices in mm and (898, 3) int64 triangles."""
+    data = _data("canonical_face.json")
+    return np.asarray(data["vertices_cm"], dtype=np.float64) * 10.0, np.asarray(data["faces"], dtype=np.int64)
+
+
+@lru_cache(maxsize=1)
+def load_template() -> Template:
+    """The canonical face refined by Loop subdivision (~29 000 vertices), with both contact regions."""
+    coarse_v, coarse_f = canonical_face()
+    vertices, faces = trimesh.remesh.subdivide_loop(coarse_v, coarse_f, iterations=SUBDIVISIONS)
+    vertices, faces = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    marks = _data("contact_regions.json")
+    regions = {m: contact_region(m, vertices, faces, marks[m]["anchors"], marks[m]["half_width_mm"]) for m in MASKS}
+    features = {k: np.asarray(v, dtype=np.int64) for k, v in _data("canonical_face.json")["features"].items()}
+    return Template(vertices=vertices, faces=faces, regions=regions, features=features)

@@ -1,0 +1,127 @@
+"""The command line: the demo runs, and bad input gets one clear line, exit code 2, no output."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+
+def assert_one_line_error(code, out, err, *words):
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cpapfit: error:"), err
+    assert "Traceback" not in err
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+def test_demo_runs_every_built_stage_and_says_what_is_missing(cli, tmp_path):
+    code, out, err = cli("demo", "--out", tmp_path)
+    assert code == 0
+    assert "RGB-D capture 640x480" in out
+    assert "landmarks   NOT BUILT" in out and "stages not built yet:" in out
+    assert (tmp_path / "subject" / "depth.png").is_file()
+    assert Image.open(tmp_path / "template_regions.png").size == (640, 480)
+
+
+def test_phantom_command_writes_a_capture(cli, tmp_path):
+    code, _, err = cli("phantom", "--seed", 3, "--out", tmp_path / "p")
+    assert code == 0 and "6 files" in err
+    code, out, _ = cli("inspect", tmp_path / "p")
+    assert code == 0 and "RGB-D capture" in out
+
+
+def test_missing_file(cli, tmp_path):
+    assert_one_line_error(*cli("inspect", tmp_path / "nope.ply"), "no such file")
+
+
+def test_empty_file(cli, tmp_path):
+    (tmp_path / "empty.ply").write_bytes(b"")
+    assert_one_line_error(*cli("inspect", tmp_path / "empty.ply"), "empty")
+
+
+def test_truncated_ply(cli, tmp_path, phantom1):
+    whole = trimesh.Trimesh(phantom1.surface, phantom1.faces).export(file_type="ply")
+    (tmp_path / "cut.ply").write_bytes(whole[: len(whole) // 3])
+    assert_one_line_error(*cli("inspect", tmp_path / "cut.ply"), "cut.ply")
+
+
+def test_garbage_with_mesh_extension(cli, tmp_path):
+    (tmp_path / "junk.stl").write_bytes(np.random.default_rng(0).bytes(3000))
+    assert_one_line_error(*cli("inspect", tmp_path / "junk.stl"), "junk.stl")
+
+
+def test_nan_vertices(cli, tmp_path, phantom1):
+    v = phantom1.surface.copy()
+    v[100] = np.nan
+    (tmp_path / "nan.ply").write_bytes(trimesh.Trimesh(v, phantom1.faces, process=False).export(file_type="ply"))
+    assert_one_line_error(*cli("inspect", tmp_path / "nan.ply"), "NaN")
+
+
+def test_wrong_stated_units(cli, tmp_path, phantom1):
+    trimesh.Trimesh(phantom1.surface / 1000, phantom1.faces).export(tmp_path / "m.ply")
+    assert_one_line_error(*cli("inspect", tmp_path / "m.ply", "--units", "mm"), "check the unit")
+
+
+@pytest.fixture
+def capture(tmp_path, phantom1_dir):
+    folder = tmp_path / "capture"
+    shutil.copytree(phantom1_dir, folder)
+    return folder
+
+
+def test_depth_of_zeros(cli, capture):
+    Image.fromarray(np.zeros((480, 640), dtype=np.uint16)).save(capture / "depth.png")
+    assert_one_line_error(*cli("inspect", capture), "valid")
+
+
+def test_intrinsics_that_do_not_match_the_image(cli, capture):
+    intr = json.loads((capture / "intrinsics.json").read_text())
+    intr["width"], intr["height"] = 1280, 720
+    (capture / "intrinsics.json").write_text(json.dumps(intr))
+    assert_one_line_error(*cli("inspect", capture), "1280x720")
+
+
+def test_colour_and_depth_of_different_sizes(cli, capture):
+    Image.open(capture / "color.png").resize((320, 240)).save(capture / "color.png")
+    assert_one_line_error(*cli("inspect", capture), "register")
+
+
+@pytest.mark.parametrize("text", ["", "{", '{"width": 640}', '{"width": 640, "height": 480, "intrinsic_matrix": [0,0,0,0,0,0,0,0,1]}'])
+def test_nonsense_intrinsics(cli, capture, text):
+    (capture / "intrinsics.json").write_text(text)
+    assert_one_line_error(*cli("inspect", capture), "intrinsics")
+
+
+def test_missing_intrinsics_and_truncated_depth(cli, capture):
+    data = (capture / "depth.png").read_bytes()
+    (capture / "depth.png").write_bytes(data[: len(data) // 2])
+    assert_one_line_error(*cli("inspect", capture), "depth.png")
+    (capture / "intrinsics.json").unlink()
+    assert_one_line_error(*cli("inspect", capture), "intrinsics.json")
+
+
+def test_commands_not_built_yet_say_so_and_write_nothing(cli, tmp_path, phantom1_dir):
+    out = tmp_path / "out"
+    code, _, err = cli("design", phantom1_dir, "--out", out)
+    assert_one_line_error(code, "", err.splitlines()[-1] + "\n", "not available yet", "landmarks")
+    assert not out.exists()
+
+
+def test_console_entry_point_prints_no_traceback(tmp_path):
+    res = subprocess.run(
+        [sys.executable, "-m", "cpapfit", "inspect", str(tmp_path / "missing.obj")], capture_output=True, text=True
+    )
+    assert_one_line_error(res.returncode, res.stdout, res.stderr, "no such file")
+
+
+def test_obj_cut_mid_line(cli, tmp_path, phantom1):
+    text = trimesh.Trimesh(phantom1.surface, phantom1.faces).export(file_type="obj")
+    cut = text.index("\nf ", int(len(text) * 0.8)) + 5  # inside a face line: "f 12"
+    (tmp_path / "cut.obj").write_text(text[:cut])
+    assert_one_line_error(*cli("inspect", tmp_path / "cut.obj"), "truncated")

@@ -1,0 +1,77 @@
+"""Mesh scans in: every supported format, units, appearance, point clouds, and the real fran scan."""
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from cpapfit.io import load_scan
+
+
+@pytest.fixture(scope="module")
+def face_m(phantom1):
+    """The seed-1 subject's surface in metres, centred (as a scanner might export it)."""
+    v = (phantom1.surface - phantom1.surface.mean(axis=0)) / 1000.0
+    return trimesh.Trimesh(v, phantom1.faces, process=False)
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".stl", ".off", ".obj", ".glb"])
+def test_formats_load_in_mm(tmp_path, face_m, suffix):
+    path = tmp_path / f"face{suffix}"
+    face_m.export(path)
+    scan = load_scan(path)
+    assert scan.units == "m"
+    assert np.ptp(scan.vertices, axis=0).max() == pytest.approx(np.ptp(face_m.vertices, axis=0).max() * 1000, rel=1e-5)
+    assert len(scan.faces) == len(face_m.faces)
+    assert np.allclose(np.linalg.norm(scan.normals, axis=1), 1.0)
+
+
+def test_stated_units_override(tmp_path, face_m):
+    path = tmp_path / "face_cm.ply"
+    trimesh.Trimesh(face_m.vertices * 100, face_m.faces).export(path)
+    assert load_scan(path, units="cm").units == "cm"
+    assert load_scan(path).units == "cm"
+
+
+def test_obj_texture_and_vertex_colours(tmp_path, face_m):
+    uv = (face_m.vertices[:, :2] - face_m.vertices[:, :2].min(0)) / np.ptp(face_m.vertices[:, :2], axis=0)
+    tex = Image.fromarray(np.full((16, 16, 3), [200, 150, 120], dtype=np.uint8))
+    textured = trimesh.Trimesh(face_m.vertices, face_m.faces, visual=trimesh.visual.TextureVisuals(uv=uv, image=tex), process=False)
+    textured.export(tmp_path / "tex.obj")
+    scan = load_scan(tmp_path / "tex.obj")
+    assert scan.texture is not None and scan.texture.shape == (16, 16, 3) and scan.uv.shape == (len(scan.vertices), 2)
+
+    coloured = trimesh.Trimesh(face_m.vertices, face_m.faces, vertex_colors=[10, 200, 30, 255], process=False)
+    coloured.export(tmp_path / "col.ply")
+    scan = load_scan(tmp_path / "col.ply")
+    assert scan.colors is not None and (scan.colors == [10, 200, 30]).all()
+
+
+def test_point_cloud_gets_outward_normals(tmp_path, face_m):
+    trimesh.PointCloud(face_m.vertices).export(tmp_path / "cloud.ply")
+    scan = load_scan(tmp_path / "cloud.ply")
+    assert scan.is_point_cloud
+    mesh_normals = np.asarray(face_m.vertex_normals)
+    agree = np.abs(np.einsum("ij,ij->i", scan.normals, mesh_normals))
+    assert np.median(agree) > 0.95  # PCA normals are the surface normals
+
+
+@pytest.mark.shared
+def test_fran_is_detected_as_metres_and_read_in_mm(shared_data):
+    scan = load_scan(shared_data / "fran_cyberware" / "fran.obj")
+    assert scan.units == "m" and "metres" in scan.units_note
+    extent = np.ptp(scan.vertices, axis=0)
+    assert 100 < extent.max() < 200  # mm
+    assert scan.texture is not None and scan.uv is not None
+
+
+@pytest.mark.shared
+def test_truedepth_capture_loads_with_its_validity_mask(shared_data):
+    scan = load_scan(shared_data / "rgbd_truedepth_mannequin")
+    assert scan.valid.shape == (240, 320) and scan.image.shape == (240, 320, 3)
+    assert 0.3 < scan.valid.mean() < 0.95  # zeros and far background are invalid
+    assert len(scan.vertices) == scan.valid.sum()
+    assert np.isnan(scan.depth[~scan.valid]).all() and np.isfinite(scan.depth[scan.valid]).all()
+    assert (scan.pixel_vertex[scan.valid] == np.arange(len(scan.vertices))).all()
+    head = scan.vertices[scan.vertices[:, 2] < 600]
+    assert len(head) > 5000 and 150 < np.ptp(head[:, 1]) < 400  # the mannequin's head, mm

@@ -1,0 +1,32 @@
+"""Depth-image geometry: back-projection inverts projection; no triangles across depth jumps."""
+
+import numpy as np
+
+from cpapfit.rgbd import backproject, grid_triangles, project
+from cpapfit.scan import Intrinsics
+
+K = Intrinsics(64, 48, 600.0, 620.0, 31.5, 23.0)  # a 64x48 crop of a typical depth camera
+
+
+def test_backproject_inverts_project():
+    depth = np.random.default_rng(0).uniform(300, 700, (48, 64))
+    pts = backproject(depth, K).reshape(-1, 3)
+    uv = project(pts, K)
+    u, v = np.meshgrid(np.arange(64), np.arange(48))
+    np.testing.assert_allclose(uv, np.stack([u.ravel(), v.ravel()], 1), atol=1e-9)
+
+
+def test_step_in_depth_is_not_triangulated_but_slopes_are():
+    depth = np.full((48, 64), 500.0)
+    depth[:, 32:] = 600.0  # a 100 mm jump between columns 31 and 32
+    depth += np.arange(48)[:, None] * 2.0  # a 2 mm/pixel slope (steep, ~60 deg) stays connected
+    valid = np.ones_like(depth, dtype=bool)
+    valid[10, 10] = False
+    pixel_vertex, faces = grid_triangles(depth, valid, K)
+    cols = np.argwhere(valid)[:, 1]
+    spans_jump = (cols[faces] < 32).any(axis=1) & (cols[faces] >= 32).any(axis=1)
+    assert not spans_jump.any()
+    assert len(faces) == 2 * 47 * 62 - 6  # two per 2x2 block but those across the jump, minus 6 at the hole
+    pts = backproject(depth, K)[valid]
+    normals = np.cross(pts[faces[:, 1]] - pts[faces[:, 0]], pts[faces[:, 2]] - pts[faces[:, 0]])
+    assert (np.einsum("ij,ij->i", normals, pts[faces[:, 0]]) < 0).all()  # facing the camera

@@ -1,0 +1,35 @@
+"""Regenerate the README's pictures under docs/: the template's contact regions and a synthetic subject.
+
+Usage: .venv/bin/python tools/readme_pictures.py
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from cpapfit.io.write import png_bytes, write_bytes
+from cpapfit.phantom import make_phantom
+from cpapfit.report.pictures import template_regions_picture
+from cpapfit.template import load_template
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def depth_picture(depth_raw: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 grey depth picture: near is bright, invalid is black."""
+    valid = depth_raw > 0
+    d = depth_raw.astype(np.float64)
+    lo, hi = np.percentile(d[valid], [1, 99])
+    grey = np.where(valid, 255 - 200 * np.clip((d - lo) / (hi - lo), 0, 1), 0).astype(np.uint8)
+    return np.repeat(grey[..., None], 3, axis=2)
+
+
+def main() -> None:
+    write_bytes(DOCS / "template_regions.png", png_bytes(template_regions_picture(load_template())))
+    ph = make_phantom(1)
+    write_bytes(DOCS / "phantom_seed1.png", png_bytes(np.concatenate([ph.image, depth_picture(ph.depth_raw)], axis=1)))
+    print(f"wrote pictures in {DOCS}")
+
+
+if __name__ == "__main__":
+    main()
