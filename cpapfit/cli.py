@@ -10,10 +10,11 @@ from pathlib import Path
 from . import __version__
 from .errors import CpapfitError, NotAvailableError
 from .io import load_scan
+from .io.landmarks import landmarks_record, read_landmarks
 from .io.phantom import write_phantom
-from .io.write import png_bytes, write_bytes
+from .io.write import json_bytes, png_bytes, write_bytes
 from .phantom import make_phantom
-from .pipeline import missing_stages, stage_table
+from .pipeline import Alignment, align, missing_stages, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -46,6 +47,15 @@ def template_summary() -> str:
     return f"{len(t.vertices)} vertices, {len(t.faces)} triangles; {bands}"
 
 
+def alignment_summaries(al: Alignment) -> dict[str, str]:
+    """One line each for the landmarks and similarity stages."""
+    lm, fit = al.landmarks, al.similarity
+    return {
+        "landmarks": f"{len(lm.points)} landmarks by {lm.path} ({lm.note})",
+        "similarity": f"scale {fit.scale:.3f}, landmark RMS {fit.rms_mm:.1f} mm; face check: {al.check.describe()}",
+    }
+
+
 def cmd_demo(args) -> int:
     out = Path(args.out)
     subject = out / "subject"
@@ -54,6 +64,7 @@ def cmd_demo(args) -> int:
     scan = load_scan(subject)
     write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
     summaries = {"scan": scan_summary(scan), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
+    summaries.update(alignment_summaries(align(scan)))
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
     print(f"stages not built yet: {', '.join(missing_stages())}; no cushion is designed yet.")
@@ -73,13 +84,34 @@ def cmd_inspect(args) -> int:
     return 0
 
 
+def load_user_landmarks(args, scan: Scan):
+    """The --landmarks file, in the scan's units, or None."""
+    path = getattr(args, "landmarks", None)
+    return read_landmarks(Path(path), scan.units, len(load_template().vertices)) if path else None
+
+
+def cmd_landmarks(args) -> int:
+    scan = load_scan(Path(args.scan), args.units)
+    al = align(scan, load_user_landmarks(args, scan))
+    fit = al.similarity
+    record = landmarks_record(al.landmarks) | {
+        "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),
+                       "landmark_rms_mm": fit.rms_mm, "note": "template (mm) -> scan (mm): x -> scale * R x + t"},
+        "face_check": {"coverage": al.check.coverage, "median_gap_mm": al.check.median_gap_mm, "nose_above_sides_mm": al.check.ridge_mm,
+                       "nose_above_lip_mm": al.check.below_mm},
+        "source": str(args.scan), "scan_units": scan.units,
+    }
+    write_bytes(Path(args.out), json_bytes(record))
+    info(f"{scan.units_note}; {len(al.landmarks.points)} landmarks by {al.landmarks.path} -> {args.out}")
+    return 0
+
+
 def not_available(command: str):
-    """A command handler for a stage not built yet: validates the scan, then says so plainly."""
+    """A command handler for a stage not built yet: reads the scan, then says so plainly."""
 
     def handler(args) -> int:
         if getattr(args, "scan", None):
-            scan = load_scan(Path(args.scan), getattr(args, "units", "auto"))
-            info(f"{scan.units_note}; {scan_summary(scan)}")
+            load_scan(Path(args.scan), getattr(args, "units", "auto"))  # bad input is still reported as such
         raise NotAvailableError(
             f"cpapfit {command}: not available yet (stages not built: {', '.join(missing_stages())}); no output written"
         )
@@ -112,21 +144,21 @@ def build_parser() -> argparse.ArgumentParser:
     for name, helptext, out_help in (
         ("design", "design the custom cushion and its files", "output folder"),
         ("register", "warp the template onto the scan", "registered_template.ply"),
-        ("landmarks", "find the facial landmarks in 3-D", "landmarks.json"),
+        ("landmarks", "find the facial landmarks in 3-D and place the template", "landmarks.json"),
         ("evaluate", "evaluate a cushion's fit on a scan", "fit.json"),
     ):
         p = sub.add_parser(name, help=helptext)
         p.add_argument("scan", help=scan_help)
         p.add_argument("--out", required=True, help=out_help)
         p.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m"], help=units_help)
-        if name in ("design", "register"):
+        if name in ("design", "register", "landmarks"):
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
-        p.set_defaults(func=not_available(name))
+        p.set_defaults(func=cmd_landmarks if name == "landmarks" else not_available(name))
 
     p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
     p.add_argument("input_dir")

@@ -2,12 +2,19 @@
 
 from dataclasses import dataclass
 
+from .align.check import FaceCheck
+from .align.initial import initial_alignment
+from .align.similarity import Similarity
+from .landmarks.types import Landmarks
+from .scan import Scan
+from .template import load_template
+
 # (stage, issue that builds it); order is the pipeline's.
 STAGES = (
     ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
-BUILT = {"scan", "template"}
+BUILT = {"scan", "template", "landmarks", "similarity"}
 
 
 @dataclass(frozen=True)
@@ -30,3 +37,17 @@ def stage_table(summaries: dict[str, str]) -> list[StageStatus]:
         StageStatus(name, name in BUILT, summaries.get(name, "") if name in BUILT else f"not built yet (issue {issue})")
         for name, issue in STAGES
     ]
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """The template placed on a scan: landmarks, similarity (template -> scan, mm) and the face check."""
+
+    landmarks: Landmarks
+    similarity: Similarity
+    check: FaceCheck
+
+
+def align(scan: Scan, user_landmarks: Landmarks | None = None) -> Alignment:
+    """Stages landmarks and similarity on a scan."""
+    return Alignment(*initial_alignment(scan, load_template(), user_landmarks))

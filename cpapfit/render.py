@@ -83,6 +83,17 @@ def interpolate(hits: Hits, faces: np.ndarray, values: np.ndarray) -> np.ndarray
     return out
 
 
+def sample_texture(hits: Hits, faces: np.ndarray, uv: np.ndarray, texture: np.ndarray) -> np.ndarray:
+    """(H, W, 3) albedo in [0, 1] looked up (nearest texel) in an (h, w, 3) uint8 texture at each hit.
+
+    uv: (N, 2) per-vertex texture coordinates, origin at the image's bottom-left (OBJ/glTF as trimesh gives)."""
+    coords = interpolate(hits, faces, uv)
+    th, tw = texture.shape[:2]
+    col = np.clip(np.round(coords[..., 0] * (tw - 1)), 0, tw - 1).astype(np.int64)
+    row = np.clip(np.round((1.0 - coords[..., 1]) * (th - 1)), 0, th - 1).astype(np.int64)
+    return texture[row, col, :3] / 255.0
+
+
 def shade(
     hits: Hits,
     vertices: np.ndarray,
@@ -92,7 +103,7 @@ def shade(
     ambient: float = 0.35,
     background: np.ndarray = np.array([0.55, 0.58, 0.62]),
 ) -> np.ndarray:
-    """(H, W, 3) uint8 Lambert-shaded image of a mesh with per-vertex albedo (N, 3) in [0, 1].
+    """(H, W, 3) uint8 Lambert-shaded image of a mesh, albedo in [0, 1] per vertex (N, 3) or per pixel (H, W, 3).
 
     `light` is the direction from the surface towards the light in the camera frame.
     """
@@ -101,6 +112,7 @@ def shade(
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
     to_light = light / np.linalg.norm(light)
     lambert = np.clip(np.abs(n @ to_light), 0.0, 1.0)  # two-sided: winding does not matter
-    rgb = interpolate(hits, faces, albedo) * (ambient + (1.0 - ambient) * lambert)[..., None]
+    per_pixel = albedo.shape[:2] == hits.triangle.shape and albedo.ndim == 3
+    rgb = (albedo if per_pixel else interpolate(hits, faces, albedo)) * (ambient + (1.0 - ambient) * lambert)[..., None]
     rgb[~hits.hit] = background
     return np.clip(np.round(rgb * 255.0), 0, 255).astype(np.uint8)

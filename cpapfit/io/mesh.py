@@ -54,6 +54,8 @@ def _read(path: Path):
         if not geoms:
             raise InputError(f"{path}: the file holds no mesh")
         loaded = trimesh.util.concatenate(geoms) if len(geoms) > 1 else geoms[0]
+    if path.suffix.lower() == ".stl" and isinstance(loaded, trimesh.Trimesh):
+        loaded.merge_vertices()  # STL stores every triangle's corners separately
     return loaded
 
 

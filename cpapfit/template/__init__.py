@@ -67,3 +67,9 @@ def load_template() -> Template:
     regions = {m: contact_region(m, vertices, faces, marks[m]["anchors"], marks[m]["half_width_mm"]) for m in MASKS}
     features = {k: np.asarray(v, dtype=np.int64) for k, v in _data("canonical_face.json")["features"].items()}
     return Template(vertices=vertices, faces=faces, regions=regions, features=features)
+
+
+def central_face(template: Template, radius_mm: float = 60.0) -> np.ndarray:
+    """(K,) int64 indices of template vertices within radius_mm of the nose tip (landmark 4)."""
+    v = template.vertices
+    return np.flatnonzero(np.linalg.norm(v - v[4], axis=1) < radius_mm)

@@ -1,0 +1,1 @@
+"""Alignment of the template to a scan: similarity (rigid + scale) and non-rigid."""

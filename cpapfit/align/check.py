@@ -1,0 +1,112 @@
+"""Does an aligned template lie on a face? The guard against confident alignments to non-faces.
+
+Two measures over the template's central face, carried by the similarity onto the scan:
+- gap: distance from each template point to the scan surface (point-to-plane at the nearest scan
+  point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
+- nose: how far the scan rises at the nose tip above the scan 18 mm to either side of it and
+  20 mm below it, along the face's forward direction (a face: 10-25 mm and 12-25 mm; a sphere, a
+  wall: a few mm; the edge of a box: a ridge, but nothing below).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import InputError
+from ..scan import Scan
+from ..template import Template
+from .similarity import Similarity
+
+NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
+COVER_MM = 10.0
+RIDGE_OFFSET_MM = 18.0
+BELOW_OFFSET_MM = 20.0
+PEAK_SEARCH_MM = 15.0
+PROBE_MM = 4.0
+
+# Thresholds: a face passes all three.
+MIN_COVERAGE = 0.5
+MAX_MEDIAN_GAP_MM = 3.5
+MIN_RIDGE_MM = 6.0
+MIN_BELOW_MM = 8.0
+
+
+@dataclass(frozen=True)
+class FaceCheck:
+    """coverage: fraction of central template points with the scan within 10 mm; median_gap_mm over
+    those; ridge_mm, below_mm: how far the scan's nose tip stands out above the scan beside it and
+    below it (a box's edge is a ridge but not a peak)."""
+
+    coverage: float
+    median_gap_mm: float
+    ridge_mm: float
+    below_mm: float
+
+    @property
+    def is_face(self) -> bool:
+        return (
+            self.coverage >= MIN_COVERAGE and self.median_gap_mm <= MAX_MEDIAN_GAP_MM
+            and self.ridge_mm >= MIN_RIDGE_MM and self.below_mm >= MIN_BELOW_MM
+        )
+
+    def describe(self) -> str:
+        return (
+            f"{100 * self.coverage:.0f} % of the central face covered (needs {100 * MIN_COVERAGE:.0f} %), median gap "
+            f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {self.ridge_mm:.1f} mm above its sides "
+            f"(at least {MIN_RIDGE_MM}) and {self.below_mm:.1f} mm above the lip (at least {MIN_BELOW_MM})"
+        )
+
+
+def check_face(scan: Scan, template: Template, similarity: Similarity, central: np.ndarray) -> FaceCheck:
+    """Measure how well the template's `central` vertex indices, aligned, lie on the scan."""
+    tree = cKDTree(scan.vertices)
+    pts = similarity.apply(template.vertices[central])
+    dist, idx = tree.query(pts, workers=-1)
+    covered = dist < COVER_MM
+    plane = np.abs(np.einsum("ij,ij->i", pts - scan.vertices[idx], scan.normals[idx]))
+    gap = float(np.median(plane[covered])) if covered.any() else np.inf
+    return FaceCheck(float(covered.mean()), gap, *_nose(tree, scan, template, similarity))
+
+
+def _peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """The most prominent scan point (along `forward`) within PEAK_SEARCH_MM of `near`, sideways:
+    the scan's own nose tip, wherever the alignment put the template's."""
+    idx = tree.query_ball_point(near, r=PEAK_SEARCH_MM + 30.0)
+    if not idx:
+        return near
+    pts = scan.vertices[idx]
+    lateral = pts - near
+    lateral -= np.outer(lateral @ forward, forward)
+    pts = pts[np.linalg.norm(lateral, axis=1) < PEAK_SEARCH_MM]
+    return pts[np.argmax(pts @ forward)] if len(pts) else near
+
+
+def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity) -> tuple[float, float]:
+    """How far the scan's nose tip (the peak near the aligned template's) stands out (mm, along the face's forward direction)
+    above the scan 18 mm to either side (those sides with data) and 20 mm below it."""
+    lm = template.vertices
+    forward, up = similarity.rotation[:, 2], similarity.rotation[:, 1]
+    side = similarity.rotation @ (lm[LEFT_ALA] - lm[RIGHT_ALA])
+    side /= np.linalg.norm(side)
+    tip = similarity.apply(lm[NOSE_TIP][None])[0]
+
+    def height(at: np.ndarray) -> float:
+        near = tree.query_ball_point(at, r=PROBE_MM + 30.0)
+        lateral = scan.vertices[near] - at
+        lateral -= np.outer(lateral @ forward, forward)
+        pts = scan.vertices[near][np.linalg.norm(lateral, axis=1) < PROBE_MM]
+        return float((pts @ forward).max()) if len(pts) else np.nan
+
+    tip = _peak(tree, scan, tip, forward)
+    top = height(tip)
+    sides = np.array([height(tip + s * RIDGE_OFFSET_MM * side) for s in (-1.0, 1.0)])
+    beside = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
+    below = top - height(tip - BELOW_OFFSET_MM * up)
+    return tuple(float(x) if np.isfinite(x) else 0.0 for x in (beside, below))
+
+
+def require_face(check: FaceCheck, how: str) -> None:
+    """Raise a clear error when the alignment does not lie on a face."""
+    if not check.is_face:
+        raise InputError(f"no face found ({how}): {check.describe()}; is this a face scan, facing the sensor?")

@@ -1,0 +1,52 @@
+"""Landmark files: a user's JSON {"points": [[x, y, z], ...], "template_index": [i, ...]} in the
+scan's units, and the landmarks cpapfit writes (mm, scan frame, with path and confidence)."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..landmarks.types import Landmarks
+from .units import MM_PER_UNIT
+
+MIN_LANDMARKS = 4
+
+
+def read_landmarks(path: Path, units: str, n_template: int) -> Landmarks:
+    """A user landmarks file as `Landmarks` in mm (`units`: the scan's unit, e.g. "m")."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such landmarks file")
+    try:
+        data = json.loads(path.read_text())
+        points = np.asarray(data["points"], dtype=np.float64)
+        raw_index = np.asarray(data["template_index"])
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not a landmarks file ({type(exc).__name__}: {exc}); expected "
+                         '{"points": [[x, y, z], ...], "template_index": [i, ...]}') from None
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) != raw_index.size:
+        raise InputError(f"{path}: points must be [x, y, z] triples, one per template_index")
+    if not np.isfinite(points).all():
+        raise InputError(f"{path}: some landmark coordinates are NaN or infinite")
+    if raw_index.size and not np.issubdtype(raw_index.dtype, np.integer):
+        raise InputError(f"{path}: template_index must be whole numbers (template vertex indices)")
+    index = raw_index.astype(np.int64).ravel()
+    bad = index[(index < 0) | (index >= n_template)]
+    if len(bad):
+        raise InputError(f"{path}: template_index {bad[0]} does not exist (the template has {n_template} vertices; Face Mesh landmarks are 0-467)")
+    if len(np.unique(index)) != len(index):
+        raise InputError(f"{path}: a template_index appears twice")
+    if len(index) < MIN_LANDMARKS:
+        raise InputError(f"{path}: {len(index)} landmarks; at least {MIN_LANDMARKS} are needed to place the template")
+    return Landmarks(points * MM_PER_UNIT[units], index, np.ones(len(index)), "user", f"user landmarks from {path.name}")
+
+
+def landmarks_record(lm: Landmarks) -> dict:
+    """The JSON record of landmarks (mm, scan frame)."""
+    return {
+        "units": "mm", "path": lm.path, "note": lm.note,
+        "points": np.round(lm.points, 4).tolist(),
+        "template_index": lm.template_index.tolist(),
+        "confidence": np.round(lm.confidence, 4).tolist(),
+    }

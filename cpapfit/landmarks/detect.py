@@ -1,0 +1,113 @@
+"""Landmarks by detection: MediaPipe on a capture's colour image, or on offscreen views of a mesh.
+
+Every detection (each view, each of four image rotations, each face found) is lifted to 3-D and
+scored by how well a robust similarity carries the template's landmarks onto it; the best one
+that faces its camera wins. Landmarks on the far side of the head (template normal turned away
+from the camera) are dropped before the final fit.
+"""
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from ..align.similarity import Similarity, fit_similarity
+from ..errors import InputError
+from ..scan import Intrinsics, Scan
+from ..template import N_LANDMARKS, Template
+from .facemesh import detect_rotations
+from .lift import lift
+from .types import Landmarks
+from .views import axis_views, render_view
+
+MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
+MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the similarity
+FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
+TWO_FACES_APART = 0.5  # two detections whose centres are farther apart than this x face size are two faces
+
+
+@dataclass(frozen=True)
+class Sight:
+    """An image with depth seen by a camera, and how camera points map to the scan's frame."""
+
+    image: np.ndarray
+    depth: np.ndarray
+    intrinsics: Intrinsics
+    to_scan: Callable[[np.ndarray], np.ndarray]
+    label: str
+
+
+@dataclass(frozen=True)
+class Detection:
+    landmarks: Landmarks
+    similarity: Similarity
+    inliers: int
+
+
+def sights(scan: Scan) -> list[Sight]:
+    """The capture's own image, or offscreen views of a mesh (none for a point cloud)."""
+    if scan.is_capture:
+        return [] if scan.image is None else [Sight(scan.image, scan.depth, scan.intrinsics, lambda p: p, "colour image")]
+    if scan.is_point_cloud:
+        return []
+    out = []
+    for i, view in enumerate(axis_views(scan)):
+        image, depth = render_view(scan, view)
+        out.append(Sight(image, depth, view.intrinsics, view.to_scan, f"render view {i}"))
+    return out
+
+
+def detect_landmarks(scan: Scan, template: Template) -> Detection | None:
+    """The best detection over every sight and rotation, or None when no face is found."""
+    path = "image" if scan.is_capture else "render"
+    best = None
+    normals = template.mesh().vertex_normals[:N_LANDMARKS]
+    for sight in sights(scan):
+        for k, faces in detect_rotations(sight.image):
+            _refuse_two_faces(faces, sight)
+            for uv in faces:
+                det = _evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg")
+                if det is not None and (best is None or det.similarity.rms_mm < best.similarity.rms_mm):
+                    best = det
+    if best is None:
+        return None
+    return Detection(
+        Landmarks(best.landmarks.points, best.landmarks.template_index, best.landmarks.confidence, path, best.landmarks.note),
+        best.similarity, best.inliers,
+    )
+
+
+def _refuse_two_faces(faces: list[np.ndarray], sight: Sight) -> None:
+    if len(faces) < 2:
+        return
+    centres = [f.mean(axis=0) for f in faces]
+    size = max(np.ptp(f, axis=0).max() for f in faces)
+    if np.linalg.norm(centres[0] - centres[1]) > TWO_FACES_APART * size:
+        raise InputError(f"two faces in the {sight.label}: scan one patient at a time (crop or rescan)")
+
+
+def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndarray, note: str) -> Detection | None:
+    """Lift one detection, fit the template to it, drop hidden landmarks, refit; None if implausible."""
+    cam, ok = lift(uv, sight.depth, sight.intrinsics)
+    if ok.sum() < MIN_LANDMARKS:
+        return None
+    index = np.flatnonzero(ok)
+    fit = fit_similarity(template.landmarks[index], cam[index])
+    facing = -(normals[index] @ fit.rotation.T)[:, 2]  # cos between template normal and the way to the camera
+    if np.median(facing) < 0.3:  # the face looks away from this camera (e.g. the inside of a mesh)
+        return None
+    index = index[facing > FACING_COS]
+    if len(index) < MIN_LANDMARKS:
+        return None
+    fit = fit_similarity(template.landmarks[index], cam[index])
+    inliers = int((fit.weights > 0.5).sum())
+    if inliers < MIN_INLIERS:
+        return None
+    # The similarity was fitted in camera coordinates; carry it and the points to the scan frame.
+    points = sight.to_scan(cam[index])
+    origin = sight.to_scan(np.zeros((1, 3)))[0]
+    basis = sight.to_scan(np.eye(3)) - origin  # rows: camera axes in scan coordinates
+    rotation = basis.T @ fit.rotation
+    scan_fit = Similarity(fit.scale, rotation, basis.T @ fit.translation + origin, fit.weights, fit.rms_mm, fit.iterations)
+    note = f"{note}; {len(index)} landmarks lifted and facing the camera, {inliers} agree with the template"
+    return Detection(Landmarks(points, index.astype(np.int64), fit.weights, "image", note), scan_fit, inliers)

@@ -1,0 +1,67 @@
+"""MediaPipe Face Mesh (0.10.21, static images, refined landmarks) on an RGB image, at 4 rotations.
+
+Landmark i < 468 is canonical-face vertex i; 468-477 are the irises. MediaPipe's C++ logging is
+kept off the terminal (it writes to file descriptor 2 directly).
+"""
+
+import contextlib
+import os
+import sys
+from functools import lru_cache
+
+import numpy as np
+
+MAX_FACES = 2  # to notice a second face, not to use it
+MIN_DETECTION_CONFIDENCE = 0.5
+
+
+@contextlib.contextmanager
+def quiet_stderr():
+    """Silence file descriptor 2 (C++ log lines) for the duration."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with open(os.devnull, "wb") as devnull:
+        os.dup2(devnull.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+@lru_cache(maxsize=1)
+def _face_mesh():
+    os.environ.setdefault("GLOG_minloglevel", "2")
+    with quiet_stderr():
+        from mediapipe.python.solutions.face_mesh import FaceMesh
+
+        return FaceMesh(
+            static_image_mode=True, refine_landmarks=True, max_num_faces=MAX_FACES,
+            min_detection_confidence=MIN_DETECTION_CONFIDENCE,
+        )
+
+
+def detect(image: np.ndarray) -> list[np.ndarray]:
+    """Faces in an (H, W, 3) uint8 RGB image: a list of (478, 2) pixel coordinates (u, v), centre-based."""
+    h, w = image.shape[:2]
+    with quiet_stderr():
+        result = _face_mesh().process(np.ascontiguousarray(image))
+    faces = result.multi_face_landmarks or []
+    return [np.array([[p.x * w - 0.5, p.y * h - 0.5] for p in face.landmark]) for face in faces]
+
+
+def unrotate(uv: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
+    """Pixel coordinates found in np.rot90(image, k) mapped back to the (H, W) image's coordinates."""
+    shapes = [shape]
+    for _ in range(k):
+        shapes.append(shapes[-1][::-1])
+    for step in range(k, 0, -1):
+        w_prev = shapes[step - 1][1]
+        uv = np.stack([w_prev - 1 - uv[:, 1], uv[:, 0]], axis=1)
+    return uv
+
+
+def detect_rotations(image: np.ndarray) -> list[tuple[int, list[np.ndarray]]]:
+    """[(k, faces)] for the image turned by k * 90 degrees, k = 0..3, faces in original pixel coordinates."""
+    shape = image.shape[:2]
+    return [(k, [unrotate(f, k, shape) for f in detect(np.rot90(image, k))]) for k in range(4)]

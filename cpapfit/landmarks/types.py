@@ -1,0 +1,33 @@
+"""The `Landmarks` type."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..frozen import freeze_arrays
+
+PATHS = ("image", "render", "fallback", "user")
+
+
+@dataclass(frozen=True)
+class Landmarks:
+    """3-D landmarks on a scan, each tied to a template vertex.
+
+    points: (K, 3) float64 mm in the scan's frame.
+    template_index: (K,) int64 template vertex of each point (i < 468: Face Mesh landmark i).
+    confidence: (K,) float64 in [0, 1]: the robust weight the landmark earned in the similarity
+        fit (0 = rejected as disagreeing with the others), or 1 for user landmarks.
+    path: how they were found: "image" (MediaPipe on the capture's colour image), "render"
+        (MediaPipe on an offscreen render of the mesh), "fallback" (no face detected: template
+        landmarks carried by a landmark-free alignment) or "user" (a landmarks file).
+    note: one line on how they were found (view, rotation, counts).
+    """
+
+    points: np.ndarray
+    template_index: np.ndarray
+    confidence: np.ndarray
+    path: str
+    note: str = ""
+
+    def __post_init__(self):
+        freeze_arrays(self)

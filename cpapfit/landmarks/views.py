@@ -1,0 +1,64 @@
+"""Offscreen views of a mesh scan for landmark detection: the frontal direction is not known, so
+the mesh is rendered from the six axis directions (detection also tries four image rotations).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..render import interpolate, raycast, sample_texture, shade
+from ..scan import Intrinsics, Scan
+
+SIZE = (640, 480)
+SKIN = np.array([0.85, 0.68, 0.58])
+VIEW_DISTANCE = 3.0  # camera distance in scan extents (mild perspective)
+FILL = 0.85  # fraction of the image height the scan's extent fills
+
+
+@dataclass(frozen=True)
+class View:
+    """A virtual camera: camera-frame point p_cam = rotation @ (p_scan - centre) + [0, 0, distance]."""
+
+    rotation: np.ndarray
+    centre: np.ndarray
+    distance: float
+    intrinsics: Intrinsics
+
+    def to_camera(self, points: np.ndarray) -> np.ndarray:
+        return (points - self.centre) @ self.rotation.T + [0.0, 0.0, self.distance]
+
+    def to_scan(self, points: np.ndarray) -> np.ndarray:
+        return (points - [0.0, 0.0, self.distance]) @ self.rotation + self.centre
+
+
+def _look_along(direction: np.ndarray) -> np.ndarray:
+    """Rotation whose third row (camera z) is `direction`, with a right-handed frame."""
+    z = direction / np.linalg.norm(direction)
+    helper = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z])
+
+
+def axis_views(scan: Scan) -> list[View]:
+    """Six views looking at the scan's centre along +-x, +-y, +-z of the scan frame."""
+    centre = np.median(scan.vertices, axis=0)
+    extent = float(np.ptp(scan.vertices, axis=0).max())
+    distance = VIEW_DISTANCE * extent
+    f = FILL * SIZE[1] * distance / extent
+    intr = Intrinsics(SIZE[0], SIZE[1], f, f, (SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2)
+    return [View(_look_along(sign * axis), centre, distance, intr) for axis in np.eye(3) for sign in (1.0, -1.0)]
+
+
+def render_view(scan: Scan, view: View) -> tuple[np.ndarray, np.ndarray]:
+    """(image (H, W, 3) uint8, depth (H, W) mm NaN where empty) of a mesh scan seen from a view."""
+    vertices = view.to_camera(scan.vertices)
+    hits = raycast(vertices, scan.faces, view.intrinsics)
+    if scan.texture is not None:
+        albedo, ambient = sample_texture(hits, scan.faces, scan.uv, scan.texture), 0.6
+    elif scan.colors is not None:
+        albedo, ambient = interpolate(hits, scan.faces, scan.colors / 255.0), 0.6
+    else:
+        albedo, ambient = np.tile(SKIN, (len(vertices), 1)), 0.3
+    image = shade(hits, vertices, scan.faces, albedo, light=np.array([0.0, -0.3, -1.0]), ambient=ambient)
+    return image, hits.depth

@@ -1,0 +1,184 @@
+"""Landmarks and the initial alignment on synthetic subjects, rotated phone frames, bare meshes,
+user landmark files, scans that are not faces, and the shared real scans."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+from scipy.spatial.transform import Rotation
+
+from cpapfit.align.initial import initial_alignment
+from cpapfit.errors import InputError
+from cpapfit.io import load_scan
+from cpapfit.io.capture import capture_files
+from cpapfit.io.write import write_files
+from cpapfit.landmarks.fallback import fallback_alignment
+from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.phantom import make_phantom
+from cpapfit.scan import Intrinsics
+from cpapfit.template import load_template
+
+TEMPLATE = load_template()
+REGION = mask_region(TEMPLATE)
+
+
+def region_error(fit, surface, faces):
+    """Mean distance (mm) of the aligned template's mask region to the true surface."""
+    return float(surface_distance(fit.apply(TEMPLATE.vertices[REGION]), surface, faces).mean())
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_phantom_landmarks_and_alignment(seed, tmp_path):
+    ph = make_phantom(seed)
+    write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    lm, fit, check = initial_alignment(load_scan(tmp_path), TEMPLATE)
+    assert lm.path == "image" and len(lm.points) > 200
+    err = np.linalg.norm(lm.points - ph.surface[lm.template_index], axis=1)
+    assert np.mean(err[lm.confidence > 0.5]) < 6.0  # mm, lifted landmarks against the truth
+    assert region_error(fit, ph.surface, ph.faces) <= 3.0
+    assert check.is_face
+
+
+def rotate_capture(ph, k: int = 1):
+    """A phantom's capture turned by k * 90 degrees (as a phone held sideways), and its truth."""
+    img, depth = np.rot90(ph.image, k), np.rot90(ph.depth_raw, k)
+    intr, surface = ph.intrinsics, ph.surface
+    for _ in range(k):  # one counter-clockwise turn: u' = v, v' = W-1-u; (x, y, z) -> (y, -x, z)
+        intr = Intrinsics(intr.height, intr.width, intr.fy, intr.fx, intr.cy, intr.width - 1 - intr.cx)
+        surface = surface[:, [1, 0, 2]] * [1, -1, 1]
+    return np.ascontiguousarray(img), np.ascontiguousarray(depth), intr, surface
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_rotated_phone_frame(k, tmp_path):
+    ph = make_phantom(4)
+    img, depth, intr, surface = rotate_capture(ph, k)
+    write_files(tmp_path, capture_files(img, depth, intr, ph.sensor.depth_scale))
+    lm, fit, _ = initial_alignment(load_scan(tmp_path), TEMPLATE)
+    assert lm.path == "image"
+    assert region_error(fit, surface, ph.faces) <= 3.0
+
+
+@pytest.fixture(scope="module")
+def rotated_stl(tmp_path_factory):
+    """The seed-5 subject's surface as a bare STL in metres, turned and moved arbitrarily."""
+    ph = make_phantom(5)
+    rot = Rotation.from_euler("zyx", [130, -70, 40], degrees=True).as_matrix()
+    surface = ph.surface @ rot.T + [40.0, -250.0, 90.0]
+    path = tmp_path_factory.mktemp("stl") / "face.stl"
+    trimesh.Trimesh(surface / 1000.0, ph.faces).export(path)
+    return path, surface, ph.faces
+
+
+def test_untextured_mesh_aligns_through_the_fallback(rotated_stl):
+    path, surface, faces = rotated_stl
+    lm, fit = fallback_alignment(load_scan(path), TEMPLATE)
+    assert lm.path == "fallback"
+    assert region_error(fit, surface, faces) <= 5.0
+
+
+def test_untextured_mesh_is_found_by_rendering(rotated_stl):
+    path, surface, faces = rotated_stl
+    lm, fit, _ = initial_alignment(load_scan(path), TEMPLATE)
+    assert lm.path == "render"
+    assert region_error(fit, surface, faces) <= 3.0
+
+
+def test_user_landmarks_override_detection(rotated_stl, tmp_path, cli):
+    path, surface, _ = rotated_stl
+    idx = [1, 33, 263, 61, 291, 152, 10, 168]
+    (tmp_path / "lm.json").write_text(json.dumps({"points": (surface[idx] / 1000.0).tolist(), "template_index": idx}))
+    code, _, err = cli("landmarks", path, "--landmarks", tmp_path / "lm.json", "--out", tmp_path / "out.json")
+    assert code == 0, err
+    out = json.loads((tmp_path / "out.json").read_text())
+    assert out["path"] == "user" and out["template_index"] == idx
+    np.testing.assert_allclose(out["points"], surface[idx], atol=1e-3)  # metres in, mm out
+
+
+@pytest.mark.parametrize("content,words", [
+    ({"points": [[0, 0, 0]] * 5, "template_index": [1, 2, 3, 4, 99999]}, "does not exist"),
+    ({"points": [[0, 0, 0]] * 3, "template_index": [1, 2, 3]}, "at least 4"),
+    ({"points": [[0, 0, 0]] * 4, "template_index": [1, 1, 2, 3]}, "twice"),
+    ({"points": [[0, 0]] * 4, "template_index": [1, 2, 3, 4]}, "triples"),
+    ({"points": [[0, 0, 0]] * 4}, "not a landmarks file"),
+])
+def test_bad_landmark_files(rotated_stl, tmp_path, cli, content, words):
+    (tmp_path / "lm.json").write_text(json.dumps(content))
+    code, _, err = cli("landmarks", rotated_stl[0], "--landmarks", tmp_path / "lm.json", "--out", tmp_path / "o.json")
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o.json").exists()
+
+
+@pytest.mark.parametrize("shape", ["sphere", "box", "cylinder"])
+def test_shapes_that_are_not_faces_are_refused(shape, tmp_path, cli):
+    mesh = {
+        "sphere": lambda: trimesh.creation.icosphere(5, radius=90.0),
+        "box": lambda: trimesh.creation.box([160.0, 200.0, 120.0]).subdivide_to_size(5.0),
+        "cylinder": lambda: trimesh.creation.cylinder(80.0, 200.0, sections=128).subdivide_to_size(5.0),
+    }[shape]()
+    mesh.export(tmp_path / f"{shape}.ply")
+    code, _, err = cli("landmarks", tmp_path / f"{shape}.ply", "--out", tmp_path / "o.json")
+    assert code == 2 and "no face found" in err
+    assert not (tmp_path / "o.json").exists()
+
+
+def test_photo_of_a_wall_with_depth_is_refused(tmp_path, cli):
+    rng = np.random.default_rng(0)
+    intr = Intrinsics(640, 480, 600.0, 600.0, 319.5, 239.5)
+    u, v = np.meshgrid(np.arange(640), np.arange(480))
+    depth_mm = 600.0 + 0.2 * (u - 320) + 0.1 * (v - 240) + rng.normal(0, 0.3, u.shape)
+    image = np.clip(180 + rng.normal(0, 12, (480, 640, 3)), 0, 255).astype(np.uint8)
+    write_files(tmp_path / "wall", capture_files(image, np.round(depth_mm * 10).astype(np.uint16), intr, 10000.0))
+    code, _, err = cli("landmarks", tmp_path / "wall", "--out", tmp_path / "o.json")
+    assert code == 2 and "no face found" in err
+
+
+def face_axes(fit):
+    """The face's forward (out of the face) and up directions in the scan frame."""
+    return fit.rotation[:, 2], fit.rotation[:, 1]
+
+
+def assert_landmarks_sit_on_the_face(scan, lm, fit):
+    """The nose tip is the most prominent scan point near it; the eyes are above the mouth."""
+    forward, up = face_axes(fit)
+    pos = {int(i): p for i, p in zip(lm.template_index, lm.points)}
+    tip = pos.get(4, pos.get(1))
+    near = scan.vertices[np.linalg.norm(scan.vertices - tip, axis=1) < 30.0]
+    prominent = near[np.argmax(near @ forward)]
+    assert abs((prominent - tip) @ forward) < 4.0  # mm
+    eyes = [pos[i] for i in (33, 263, 133, 362) if i in pos]
+    mouth = [pos[i] for i in (61, 291, 0, 17) if i in pos]
+    assert (np.mean(eyes, axis=0) - np.mean(mouth, axis=0)) @ up > 25.0
+
+
+@pytest.mark.shared
+def test_fran_gets_landmarks_automatically(shared_data):
+    scan = load_scan(shared_data / "fran_cyberware" / "fran.obj")
+    lm, fit, _ = initial_alignment(scan, TEMPLATE)
+    assert lm.path == "render"
+    forward, up = face_axes(fit)
+    assert forward @ [1, 0, 0] > 0.5 and up @ [0, 1, 0] > 0.7  # looks along +x, head up is +y
+    assert_landmarks_sit_on_the_face(scan, lm, fit)
+
+
+@pytest.mark.shared
+def test_rotated_truedepth_frame_gets_landmarks_automatically(shared_data):
+    scan = load_scan(shared_data / "rgbd_truedepth_mannequin")
+    lm, fit, _ = initial_alignment(scan, TEMPLATE)
+    assert lm.path == "image"
+    forward, up = face_axes(fit)
+    assert forward @ [0, 0, -1] > 0.5  # towards the camera
+    assert up @ [-1, 0, 0] > 0.7  # the sensor is turned: the head's top is image left
+    assert_landmarks_sit_on_the_face(scan, lm, fit)
+
+
+def test_two_faces_are_refused(tmp_path):
+    a, b = make_phantom(6), make_phantom(7)
+    image = np.concatenate([a.image[:, 160:480], b.image[:, 160:480]], axis=1)
+    depth = np.concatenate([a.depth_raw[:, 160:480], b.depth_raw[:, 160:480]], axis=1)
+    write_files(tmp_path, capture_files(image, depth, a.intrinsics, a.sensor.depth_scale))
+    Image.fromarray(image).save(tmp_path / "color.png")
+    with pytest.raises(InputError, match="two faces"):
+        initial_alignment(load_scan(tmp_path), TEMPLATE)
