@@ -7,15 +7,17 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from . import __version__
 from .errors import CpapfitError, NotAvailableError
 from .io import load_scan
 from .io.landmarks import landmarks_record, read_landmarks
 from .io.phantom import write_phantom
-from .io.write import json_bytes, png_bytes, write_bytes
+from .io.write import json_bytes, ply_bytes, png_bytes, write_bytes
 from .phantom import make_phantom
-from .pipeline import Alignment, align, missing_stages, stage_table
-from .report.pictures import template_regions_picture
+from .pipeline import Alignment, align, missing_stages, register_template, stage_table
+from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
 from .template import load_template
 
@@ -56,6 +58,31 @@ def alignment_summaries(al: Alignment) -> dict[str, str]:
     }
 
 
+def registration_summary(reg) -> str:
+    """One line for the non-rigid stage."""
+    last = reg.log[-1]
+    res = reg.residual[reg.valid]
+    return (
+        f"{len(reg.log)} iterations, {int(reg.valid.sum())} of {len(reg.valid)} template vertices matched, "
+        f"residual median {np.median(res):.2f} mm, p95 {np.percentile(res, 95):.2f} mm (final membrane weight {last.membrane:g})"
+    )
+
+
+def write_registration(reg, path: Path) -> None:
+    """The warped template as PLY with residual_mm (-1 where unmatched) and valid vertex properties."""
+    residual = np.where(reg.valid, reg.residual, -1.0)
+    attributes = {"residual_mm": residual.astype(np.float32), "valid": reg.valid.astype(np.uint8)}
+    write_bytes(path, ply_bytes(reg.vertices, load_template().faces, attributes))
+
+
+def cmd_register(args) -> int:
+    scan = load_scan(Path(args.scan), args.units)
+    reg = register_template(scan, align(scan, load_user_landmarks(args, scan)))
+    write_registration(reg, Path(args.out))
+    info(f"{scan.units_note}; {registration_summary(reg)} -> {args.out}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     out = Path(args.out)
     subject = out / "subject"
@@ -64,7 +91,13 @@ def cmd_demo(args) -> int:
     scan = load_scan(subject)
     write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
     summaries = {"scan": scan_summary(scan), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
-    summaries.update(alignment_summaries(align(scan)))
+    al = align(scan)
+    summaries.update(alignment_summaries(al))
+    reg = register_template(scan, al)
+    write_registration(reg, out / "registered_template.ply")
+    title = f"synthetic subject {args.seed}: registration residual"
+    write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, al.similarity, title))
+    summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
     print(f"stages not built yet: {', '.join(missing_stages())}; no cushion is designed yet.")
@@ -158,7 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
-        p.set_defaults(func=cmd_landmarks if name == "landmarks" else not_available(name))
+        p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register}.get(name, not_available(name)))
 
     p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
     p.add_argument("input_dir")

@@ -4,6 +4,7 @@ from dataclasses import dataclass
 
 from .align.check import FaceCheck
 from .align.initial import initial_alignment
+from .align.nonrigid import NonrigidParams, Registration, register
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
@@ -14,7 +15,7 @@ STAGES = (
     ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
-BUILT = {"scan", "template", "landmarks", "similarity"}
+BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid"}
 
 
 @dataclass(frozen=True)
@@ -51,3 +52,9 @@ class Alignment:
 def align(scan: Scan, user_landmarks: Landmarks | None = None) -> Alignment:
     """Stages landmarks and similarity on a scan."""
     return Alignment(*initial_alignment(scan, load_template(), user_landmarks))
+
+
+def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
+    """Stage nonrigid: the similarity-aligned template warped onto the scan."""
+    template = load_template()
+    return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params)

@@ -16,6 +16,12 @@ from .rgbd import pixel_rays
 from .scan import Intrinsics
 
 
+LIGHT = np.array([-0.3, -0.4, -1.0])  # towards the light, camera frame: above left of the camera
+LIGHT.flags.writeable = False
+BACKGROUND = np.array([0.55, 0.58, 0.62])
+BACKGROUND.flags.writeable = False
+
+
 @dataclass(frozen=True)
 class Hits:
     """Where each pixel's ray meets the mesh.
@@ -99,9 +105,9 @@ def shade(
     vertices: np.ndarray,
     faces: np.ndarray,
     albedo: np.ndarray,
-    light: np.ndarray = np.array([-0.3, -0.4, -1.0]),
+    light: np.ndarray = LIGHT,
     ambient: float = 0.35,
-    background: np.ndarray = np.array([0.55, 0.58, 0.62]),
+    background: np.ndarray = BACKGROUND,
 ) -> np.ndarray:
     """(H, W, 3) uint8 Lambert-shaded image of a mesh, albedo in [0, 1] per vertex (N, 3) or per pixel (H, W, 3).
 

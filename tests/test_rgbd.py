@@ -30,3 +30,19 @@ def test_step_in_depth_is_not_triangulated_but_slopes_are():
     pts = backproject(depth, K)[valid]
     normals = np.cross(pts[faces[:, 1]] - pts[faces[:, 0]], pts[faces[:, 2]] - pts[faces[:, 0]])
     assert (np.einsum("ij,ij->i", normals, pts[faces[:, 0]]) < 0).all()  # facing the camera
+
+
+def test_grid_boundary_equals_the_edge_definition():
+    from cpapfit.align.correspondences import boundary_vertices, grid_boundary
+    from cpapfit.scan import Scan
+
+    rng = np.random.default_rng(1)
+    depth = 500.0 + rng.normal(0, 0.2, (48, 64))
+    depth[20:30, 5:15] += 80.0  # a step: a rim inside the image
+    valid = rng.uniform(size=depth.shape) > 0.05  # scattered holes
+    pixel_vertex, faces = grid_triangles(depth, valid, K)
+    pts = backproject(depth, K)[valid]
+    scan = Scan(vertices=pts, faces=faces, normals=np.zeros_like(pts), depth=depth, valid=valid, pixel_vertex=pixel_vertex, intrinsics=K)
+    used = np.bincount(faces.ravel(), minlength=len(pts)) > 0
+    assert np.array_equal(grid_boundary(scan)[used], boundary_vertices(len(pts), faces)[used])
+    assert grid_boundary(scan)[~used].all()  # a pixel with no triangle is no place to match

@@ -1,6 +1,5 @@
 """Initial alignment of the template on a scan: landmarks (user, detected, or none) and a similarity."""
 
-import numpy as np
 
 from ..scan import Scan
 from ..template import Template, central_face

@@ -44,6 +44,7 @@ def png_bytes(image: np.ndarray) -> bytes:
 
 
 def ply_bytes(vertices: np.ndarray, faces: np.ndarray, attributes: dict | None = None) -> bytes:
-    """Binary PLY of an (N, 3) mm mesh with (M, 3) faces, vertex order kept, optional vertex attributes."""
+    """Binary PLY of an (N, 3) mm mesh with (M, 3) faces, vertex order kept, optional (N,) vertex
+    attributes written as extra vertex properties."""
     mesh = trimesh.Trimesh(vertices, faces, process=False, vertex_attributes=attributes or {})
     return trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=bool(attributes))

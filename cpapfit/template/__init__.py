@@ -13,7 +13,7 @@ import numpy as np
 import trimesh
 
 from ..frozen import freeze_arrays
-from .regions import ContactRegion, contact_region
+from .regions import contact_region
 
 N_LANDMARKS = 468
 SUBDIVISIONS = 3  # Loop subdivision rounds: 468 -> 28 881 vertices

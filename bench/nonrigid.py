@@ -1,0 +1,149 @@
+"""Non-rigid registration: accuracy on synthetic subjects, speed and memory on a full 640x480
+capture, and trimesh's nricp_amberg on the same pair (issue 4 figures).
+
+Usage:
+  .venv/bin/python bench/nonrigid.py accuracy [--seeds 50]
+  .venv/bin/python bench/nonrigid.py speed
+  .venv/bin/python bench/nonrigid.py amberg [--seeds 2]
+"""
+
+import argparse
+import platform
+import resource
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from cpapfit.align.nonrigid import NonrigidParams, register
+from cpapfit.io.capture import capture_files, load_capture
+from cpapfit.io.write import write_files
+from cpapfit import metrics
+from cpapfit.metrics import mask_region
+from cpapfit.phantom import make_phantom
+from cpapfit.pipeline import align
+from cpapfit.template import load_template
+
+TEMPLATE = load_template()
+REGION = mask_region(TEMPLATE)
+
+
+def capture(ph, folder: Path, depth=None):
+    write_files(folder, capture_files(ph.image, ph.depth_raw if depth is None else depth, ph.intrinsics, ph.sensor.depth_scale))
+    return load_capture(folder)
+
+
+def scan_to_template(scan, vertices):
+    """Distances (mm) from scan points over the mask region to the registered template."""
+    return metrics.scan_to_template(scan.vertices, vertices, TEMPLATE.faces, REGION)
+
+
+def timed_register(aligned, scan, al, mode):
+    t0 = time.perf_counter()
+    reg = register(aligned, TEMPLATE.faces, scan, al.landmarks, NonrigidParams(correspondence=mode))
+    return reg, time.perf_counter() - t0
+
+
+def subjects(seeds: int):
+    """(seed, phantom, scan, alignment, similarity-aligned template) for seeds 0..seeds-1."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(seeds):
+            ph = make_phantom(seed)
+            scan = capture(ph, Path(tmp) / str(seed))
+            al = align(scan)
+            yield seed, ph, scan, al, al.similarity.apply(TEMPLATE.vertices)
+
+
+def accuracy(seeds: int) -> None:
+    rows = []
+    for _, ph, scan, al, aligned in subjects(seeds):
+        grid, t_grid = timed_register(aligned, scan, al, "grid")
+        kd, t_kd = timed_register(aligned, scan, al, "kdtree")
+        d = scan_to_template(scan, grid.vertices)
+        rows.append({
+            "corr": np.linalg.norm(grid.vertices[REGION] - ph.surface[REGION], axis=1).mean(),
+            "corr_similarity": np.linalg.norm(aligned[REGION] - ph.surface[REGION], axis=1).mean(),
+            "median": np.median(d), "p95": np.percentile(d, 95), "flipped": metrics.flipped_triangles(aligned, grid.vertices, TEMPLATE.faces, REGION),
+            "modes": np.linalg.norm(grid.vertices[REGION] - kd.vertices[REGION], axis=1).mean(),
+            "t_grid": t_grid, "t_kd": t_kd, "iterations": len(grid.log), "pooled": d,
+        })
+    print(f"machine: {platform.machine()}, Python {platform.python_version()}, seeds 0-{seeds - 1}")
+    for key, label in (
+        ("corr_similarity", "correspondence after similarity only, mask-region mean (mm)"),
+        ("corr", "correspondence after non-rigid, mask-region mean distance to true position (mm)"),
+        ("median", "scan-to-template distance over mask region, median per seed (mm)"),
+        ("p95", "scan-to-template distance over mask region, p95 per seed (mm)"),
+        ("modes", "grid vs k-d tree registrations, mask-region mean difference (mm)"),
+        ("t_grid", "non-rigid time, grid correspondences (s)"),
+        ("t_kd", "non-rigid time, k-d tree correspondences (s)"),
+        ("iterations", "iterations"),
+    ):
+        v = np.array([r[key] for r in rows], dtype=float)
+        print(f"{label}: mean {v.mean():.3f}, median {np.median(v):.3f}, p95 {np.percentile(v, 95):.3f}, max {v.max():.3f}")
+    pooled = np.concatenate([r["pooled"] for r in rows])
+    print(f"scan-to-template pooled over all seeds: median {np.median(pooled):.3f} mm, p95 {np.percentile(pooled, 95):.3f} mm")
+    print(f"seeds with correspondence <= 1.0 mm: {sum(r['corr'] <= 1.0 for r in rows)}/{len(rows)}")
+    print(f"flipped mask-region triangles, all seeds: {sum(r['flipped'] for r in rows)}")
+
+
+def full_frame(tmp: Path):
+    """Seed 0 with a wall behind the head at 900 mm, so ~300 k of the 640x480 pixels are valid."""
+    ph = make_phantom(0)
+    wall = np.round(np.random.default_rng(0).normal(900.0, 0.5, ph.depth_raw.shape) * ph.sensor.depth_scale / 1000.0)
+    return ph, capture(ph, tmp, np.where(ph.depth_raw > 0, ph.depth_raw, wall).astype(np.uint16))
+
+
+def speed() -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        ph, scan = full_frame(Path(tmp))
+        al = align(scan)
+        aligned = al.similarity.apply(TEMPLATE.vertices)
+        print(f"machine: {platform.machine()}, Python {platform.python_version()}; scan {len(scan.vertices)} points, template {len(aligned)} vertices")
+        for mode in ("grid", "kdtree"):
+            times = []
+            for _ in range(3):
+                reg, t = timed_register(aligned, scan, al, mode)
+                times.append(t)
+            corr = np.linalg.norm(reg.vertices[REGION] - ph.surface[REGION], axis=1).mean()
+            print(f"{mode}: best of 3 {min(times):.2f} s, median {np.median(times):.2f} s, {len(reg.log)} iterations, correspondence {corr:.3f} mm")
+        print(f"peak resident memory of the whole process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+def amberg(seeds: int) -> None:
+    """trimesh.registration.nricp_amberg on the same pairs, parameters scaled to mm."""
+    steps = [[0.02, 10, 0.5, 10], [0.007, 5, 0.5, 10], [0.002, 2.5, 0.5, 10], [0.0005, 0, 0.0, 10]]
+    print(f"machine: {platform.machine()}, Python {platform.python_version()}; nricp_amberg steps {steps}, distance_threshold 5 mm")
+    for seed, ph, scan, al, aligned in subjects(seeds):
+        ours, t_ours = timed_register(aligned, scan, al, "grid")
+        keep = al.landmarks.confidence >= 0.5
+        t0 = time.perf_counter()
+        theirs = trimesh.registration.nricp_amberg(
+            trimesh.Trimesh(aligned, TEMPLATE.faces, process=False), trimesh.Trimesh(scan.vertices, scan.faces, process=False),
+            source_landmarks=al.landmarks.template_index[keep], target_positions=al.landmarks.points[keep],
+            steps=steps, distance_threshold=5.0,
+        )
+        t_theirs = time.perf_counter() - t0
+        for name, v, t in (("cpapfit", ours.vertices, t_ours), ("nricp_amberg", theirs, t_theirs)):
+            d = scan_to_template(scan, v)
+            corr = np.linalg.norm(v[REGION] - ph.surface[REGION], axis=1).mean()
+            print(f"seed {seed} {name:>12}: {t:7.2f} s, correspondence {corr:.3f} mm, scan-to-template median {np.median(d):.3f} p95 {np.percentile(d, 95):.3f} mm")
+        print(f"seed {seed} time ratio nricp_amberg / cpapfit: {t_theirs / t_ours:.1f}x")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("what", choices=["accuracy", "speed", "amberg"])
+    ap.add_argument("--seeds", type=int, default=None)
+    args = ap.parse_args()
+    if args.what == "accuracy":
+        accuracy(args.seeds or 50)
+    elif args.what == "speed":
+        speed()
+    else:
+        amberg(args.seeds or 2)
+
+
+if __name__ == "__main__":
+    main()
