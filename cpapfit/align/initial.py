@@ -1,6 +1,5 @@
 """Initial alignment of the template on a scan: landmarks (user, detected, or none) and a similarity."""
 
-
 from ..scan import Scan
 from ..template import Template, central_face
 from ..landmarks.detect import detect_landmarks
@@ -8,8 +7,6 @@ from ..landmarks.fallback import fallback_alignment
 from ..landmarks.types import Landmarks
 from .check import FaceCheck, check_face, require_face
 from .similarity import Similarity, fit_similarity
-
-MIN_USER_LANDMARKS = 4
 
 
 def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
