@@ -14,9 +14,10 @@ from .errors import CpapfitError, NotAvailableError
 from .io import load_scan
 from .io.landmarks import landmarks_record, read_landmarks
 from .io.phantom import write_phantom
-from .io.write import json_bytes, ply_bytes, png_bytes, write_bytes
+from .io.write import json_bytes, ply_bytes, png_bytes, write_bytes, write_files
 from .phantom import make_phantom
-from .pipeline import Alignment, align, missing_stages, register_template, stage_table
+from .export import stl_bytes, threemf_bytes
+from .pipeline import NOT_BUILT_PARTS, Alignment, Design, align, design, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -68,18 +69,69 @@ def registration_summary(reg) -> str:
     )
 
 
-def write_registration(reg, path: Path) -> None:
+def registration_ply(reg) -> bytes:
     """The warped template as PLY with residual_mm (-1 where unmatched) and valid vertex properties."""
     residual = np.where(reg.valid, reg.residual, -1.0)
     attributes = {"residual_mm": residual.astype(np.float32), "valid": reg.valid.astype(np.uint8)}
-    write_bytes(path, ply_bytes(reg.vertices, load_template().faces, attributes))
+    return ply_bytes(reg.vertices, load_template().faces, attributes)
 
 
 def cmd_register(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
     reg = register_template(scan, align(scan, load_user_landmarks(args, scan)))
-    write_registration(reg, Path(args.out))
+    write_bytes(Path(args.out), registration_ply(reg))
     info(f"{scan.units_note}; {registration_summary(reg)} -> {args.out}")
+    return 0
+
+
+def mask_dimensions(d: Design) -> dict:
+    """Width (across the face), height (along the head) and depth (along the mask axis) in mm."""
+    axis, up = d.cushion.axis, d.cushion.up
+    side = np.cross(up, axis)
+    v = d.solid.vertices
+    return {f"{k}_mm": round(float(np.ptp(v @ a)), 2) for k, a in (("width", side), ("height", up), ("depth", axis))}
+
+
+def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
+    """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}."""
+    reg = d.registration
+    fit = {
+        "cpapfit_version": __version__, "units": "mm", "source": scan.source, "scan_units": scan.units,
+        "mask": d.contact.mask,
+        "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points)},
+        "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
+                         "residual_median_mm": float(np.median(reg.residual[reg.valid]))},
+        "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
+        "cushion": {**mask_dimensions(d), **d.checks},
+        "fit_before_compression": d.rim.summary(),
+        "parameters": dict(vars(d.cushion.params)),
+        "not_built_yet": list(NOT_BUILT_PARTS),
+    }
+    return {
+        "registered_template.ply": registration_ply(reg),
+        "contact_curve.json": json_bytes({"units": "mm", "mask": d.contact.mask, "points": np.round(d.contact.curve, 4).tolist()}),
+        "cushion.stl": stl_bytes(d.solid),
+        "cushion.3mf": threemf_bytes(d.solid, "cushion"),
+        "fit.json": json_bytes(fit),
+    }
+
+
+def design_summary(d: Design) -> str:
+    """One line on a designed cushion."""
+    dims, rim = mask_dimensions(d), d.rim.summary()
+    return (
+        f"{d.contact.mask} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
+        f"watertight, thinnest wall {d.checks['min_wall_mm']:.2f} mm, rim-to-skin gap median {rim['rim_gap_median_mm']:.2f} mm, "
+        f"max {rim['rim_gap_max_mm']:.2f} mm"
+    )
+
+
+def cmd_design(args) -> int:
+    scan = load_scan(Path(args.scan), args.units)
+    d = design(scan, args.mask, load_user_landmarks(args, scan))
+    written = write_files(Path(args.out), design_files(d, scan))
+    info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
+    info(f"not built yet: {', '.join(NOT_BUILT_PARTS)}")
     return 0
 
 
@@ -91,16 +143,19 @@ def cmd_demo(args) -> int:
     scan = load_scan(subject)
     write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
     summaries = {"scan": scan_summary(scan), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
-    al = align(scan)
-    summaries.update(alignment_summaries(al))
-    reg = register_template(scan, al)
-    write_registration(reg, out / "registered_template.ply")
+    d = design(scan, "nasal")
+    summaries.update(alignment_summaries(d.alignment))
+    reg = d.registration
+    written = write_files(out / "design", design_files(d, scan))
     title = f"synthetic subject {args.seed}: registration residual"
-    write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, al.similarity, title))
+    write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, d.alignment.similarity, title))
     summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
+    summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
+    summaries["cushion"] = design_summary(d)
+    summaries["export"] = f"{len(written)} files in {out / 'design'} (STL, 3MF, PLY, JSON); casting mould not built yet"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
-    print(f"stages not built yet: {', '.join(missing_stages())}; no cushion is designed yet.")
+    print(f"stages not built yet: {', '.join(missing_stages())}; parts not built yet: {', '.join(NOT_BUILT_PARTS)}.")
     return 0
 
 
@@ -191,7 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
-        p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register}.get(name, not_available(name)))
+        p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design}.get(name, not_available(name)))
 
     p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
     p.add_argument("input_dir")

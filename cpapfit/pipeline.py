@@ -5,6 +5,11 @@ from dataclasses import dataclass
 from .align.check import FaceCheck
 from .align.initial import initial_alignment
 from .align.nonrigid import NonrigidParams, Registration, register
+from .contact import Contact, transfer_contact
+from .cushion.nurbs import Cushion, CushionParams, design_cushion
+from .cushion.solid import cushion_solid
+from .evaluate.gap import RimGap, rim_gap
+from .export import check_solid
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
@@ -15,7 +20,8 @@ STAGES = (
     ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
-BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid"}
+BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export"}
+NOT_BUILT_PARTS = ("casting mould (issue 5)", "generic cushion (issue 5)", "pressure and leak (issue 6)")
 
 
 @dataclass(frozen=True)
@@ -58,3 +64,29 @@ def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams =
     """Stage nonrigid: the similarity-aligned template warped onto the scan."""
     template = load_template()
     return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params)
+
+
+@dataclass(frozen=True)
+class Design:
+    """A custom cushion for a scan: every stage's result, the printable solid and its checks."""
+
+    alignment: Alignment
+    registration: Registration
+    contact: Contact
+    cushion: Cushion
+    solid: object  # trimesh.Trimesh, checked
+    checks: dict
+    rim: RimGap
+
+
+def design(scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams()) -> Design:
+    """Scan to checked printable cushion: align, register, carry the seal over, design, thicken, check."""
+    template = load_template()
+    al = align(scan, user_landmarks)
+    reg = register_template(scan, al)
+    contact = transfer_contact(template, reg.vertices, scan, mask)
+    axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
+    cushion = design_cushion(contact, axis, up, reg.vertices[4], params)
+    solid, wall = cushion_solid(cushion, contact.normals)
+    checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan))

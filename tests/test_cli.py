@@ -25,10 +25,10 @@ def test_demo_runs_every_built_stage_and_says_what_is_missing(cli, tmp_path):
     assert code == 0
     assert "RGB-D capture 640x480" in out
     assert "landmarks   built" in out and "by image" in out
-    assert "nonrigid    built" in out and "contact     NOT BUILT" in out and "stages not built yet:" in out
+    assert "cushion     built" in out and "evaluate    NOT BUILT" in out and "stages not built yet:" in out
     assert (tmp_path / "subject" / "depth.png").is_file()
     assert Image.open(tmp_path / "template_regions.png").size == (640, 480)
-    assert (tmp_path / "registered_template.ply").is_file() and (tmp_path / "residual.png").is_file()
+    assert (tmp_path / "design" / "cushion.stl").is_file() and (tmp_path / "residual.png").is_file()
 
 
 def test_phantom_command_writes_a_capture(cli, tmp_path):
@@ -109,9 +109,16 @@ def test_missing_intrinsics_and_truncated_depth(cli, capture):
 
 
 def test_commands_not_built_yet_say_so_and_write_nothing(cli, tmp_path, phantom1_dir):
-    out = tmp_path / "out"
-    assert_one_line_error(*cli("design", phantom1_dir, "--out", out), "not available yet", "contact")
+    out = tmp_path / "fit.json"
+    assert_one_line_error(*cli("evaluate", phantom1_dir, "--cushion", "c.stl", "--out", out), "not available yet", "evaluate")
     assert not out.exists()
+
+
+def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir):
+    """Seed 1's nasal cushion bends tighter than its wall (bench/RESULTS.md): refused, not written."""
+    out = tmp_path / "out"
+    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "printability", "min_wall_mm")
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_console_entry_point_prints_no_traceback(tmp_path):

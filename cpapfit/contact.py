@@ -1,0 +1,86 @@
+"""The mask's contact region carried onto the patient: the closed seal curve and its band.
+
+On the template, the region's centre curve (an edge path) is resampled evenly, smoothed, and
+stored as barycentric points on template triangles. Through the registration (same triangles,
+warped vertices) they land on the patient's face; each is then moved to the closest point of
+the scan itself where the scan has data within PROJECT_MM, so the cushion touches the real face
+rather than the template's approximation of it.
+"""
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import trimesh
+from scipy.ndimage import gaussian_filter1d
+from scipy.spatial import cKDTree
+
+from .frozen import freeze_arrays
+from .scan import Scan
+from .template import Template, load_template
+
+SAMPLES = 128  # points around the seal
+SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples
+PROJECT_MM = 3.0  # farther from the scan than this: no scan data there, keep the registered point
+
+
+@dataclass(frozen=True)
+class Contact:
+    """The seal on the patient (mm, scan frame).
+
+    curve: (K, 3) closed seal curve, ordered around the loop (last joins first).
+    normals: (K, 3) unit skin normals at the curve points (out of the face).
+    on_scan: (K,) bool: the point was moved onto the scan (False: no scan data near it).
+    band: (B, 3) the contact band's template vertices on the patient (registered positions).
+    """
+
+    mask: str
+    curve: np.ndarray
+    normals: np.ndarray
+    on_scan: np.ndarray
+    band: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+
+def closed_resample(points: np.ndarray, n: int) -> np.ndarray:
+    """(n, 3) points evenly spaced by arc length along a closed polyline (K, 3)."""
+    loop = np.vstack([points, points[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(loop, axis=0), axis=1))])
+    t = np.linspace(0.0, s[-1], n, endpoint=False)
+    return np.stack([np.interp(t, s, loop[:, k]) for k in range(3)], axis=1)
+
+
+@lru_cache(maxsize=4)
+def template_curve(mask: str) -> tuple[np.ndarray, np.ndarray]:
+    """(triangles (K,), barycentric (K, 3)) of the smoothed seal curve on the template."""
+    template = load_template()
+    pts = closed_resample(template.vertices[template.regions[mask].curve], SAMPLES)
+    pts = gaussian_filter1d(pts, SMOOTH_SAMPLES, axis=0, mode="wrap")
+    mesh = template.mesh()
+    closest, _, tri = trimesh.proximity.closest_point(mesh, pts)
+    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[tri], closest)
+    return tri, bary
+
+
+def transfer_contact(template: Template, warped: np.ndarray, scan: Scan, mask: str) -> Contact:
+    """The seal curve and band of `mask` on the patient, from the warped template (n, 3) mm."""
+    tri, bary = template_curve(mask)
+    corners = warped[template.faces[tri]]  # (K, 3, 3)
+    carried = np.einsum("kj,kjc->kc", bary, corners)
+    normals = np.einsum("kj,kjc->kc", bary, trimesh.Trimesh(warped, template.faces, process=False).vertex_normals[template.faces[tri]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    curve, on_scan = _onto_scan(carried, scan)
+    return Contact(mask, curve, normals, on_scan, warped[template.regions[mask].band])
+
+
+def _onto_scan(points: np.ndarray, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+    """Closest scan surface points (or vertices, for a point cloud) within PROJECT_MM."""
+    if scan.is_point_cloud:
+        dist, idx = cKDTree(scan.vertices).query(points)
+        closest = scan.vertices[idx]
+    else:
+        closest, dist, _ = trimesh.proximity.closest_point(trimesh.Trimesh(scan.vertices, scan.faces, process=False), points)
+    near = dist <= PROJECT_MM
+    return np.where(near[:, None], closest, points), near

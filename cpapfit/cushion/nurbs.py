@@ -1,0 +1,125 @@
+"""The cushion as a NURBS surface (geomdl): AROUND x ROWS = 32 x 8 = 256 control points.
+
+u runs around the seal (periodic), v from the face to the frame (clamped). Row 0 is solved so
+that the surface's face-side boundary passes through the seal curve on the patient (the
+paper's step: control points moved onto the warped contact region); rows 1-2 carry the seal
+flange outwards along the skin; rows 3-7 form the wall rising to the frame interface: a
+planar elliptic ring, the same for every patient, at a fixed clearance above the nose tip.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from geomdl import NURBS
+
+from ..contact import Contact, closed_resample
+from ..frozen import freeze_arrays
+
+AROUND, ROWS, DEGREE = 32, 8, 3
+# The flange's rows in units of the flange width: (outwards across the seal, up off the skin).
+# Row 0 is the seal curve; the flange turns up gently so that the wall never bends tighter than
+# its own thickness.
+FLANGE_PROFILE = ((0.0, 0.0), (0.45, 0.0), (0.9, 0.35), (1.2, 1.2))
+WALL_STEPS = (0.1, 0.3, 0.6, 1.0)  # the wall's rows along its curve: close together where it leaves the flange
+FRAME_RING_MM = {"nasal": (48.0, 46.0), "oronasal": (82.0, 98.0)}  # (width, height) of the frame ring
+
+
+@dataclass(frozen=True)
+class CushionParams:
+    """Design parameters (mm): wall thickness, seal flange width along the skin, interference
+    (rim pre-load into the skin), frame clearance above the nose tip."""
+
+    wall_mm: float = 2.0
+    flange_mm: float = 5.0
+    interference_mm: float = 0.0
+    frame_clearance_mm: float = 10.0
+
+
+@dataclass(frozen=True)
+class Cushion:
+    """control: (AROUND, ROWS, 3) mm control points; axis, up: unit mask axis (out of the face)
+    and head-up direction; mask: "nasal" | "oronasal"."""
+
+    mask: str
+    control: np.ndarray
+    axis: np.ndarray
+    up: np.ndarray
+    params: CushionParams
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    def surface(self) -> NURBS.Surface:
+        """The geomdl surface, periodic in u (first DEGREE control columns repeated), clamped in v."""
+        wrapped = np.concatenate([self.control, self.control[:DEGREE]], axis=0)
+        surf = NURBS.Surface()
+        surf.degree_u, surf.degree_v = DEGREE, DEGREE
+        surf.ctrlpts_size_u, surf.ctrlpts_size_v = len(wrapped), ROWS
+        surf.ctrlpts = wrapped.reshape(-1, 3).tolist()
+        surf.weights = [1.0] * (len(wrapped) * ROWS)
+        n_u = len(wrapped) + DEGREE + 1
+        surf.knotvector_u = (np.arange(n_u) / (n_u - 1)).tolist()
+        inner = ROWS - DEGREE + 1
+        surf.knotvector_v = [0.0] * DEGREE + np.linspace(0, 1, inner).tolist() + [1.0] * DEGREE
+        return surf
+
+    def grid(self, n_u: int = 128, n_v: int = 24) -> np.ndarray:
+        """(n_u, n_v, 3) surface points: u around the seal (not repeating the start), v face to frame."""
+        surf = self.surface()
+        lo, hi = surf.knotvector_u[DEGREE], surf.knotvector_u[-DEGREE - 1]
+        us = lo + (hi - lo) * np.arange(n_u) / n_u
+        vs = np.linspace(0.0, 1.0, n_v)
+        pts = surf.evaluate_list([(u, v) for u in us for v in vs])
+        return np.asarray(pts, dtype=np.float64).reshape(n_u, n_v, 3)
+
+
+def periodic_interpolation(points: np.ndarray) -> np.ndarray:
+    """(N, 3) control points of the uniform periodic cubic B-spline through (N, 3) points at its knots."""
+    n = len(points)
+    basis = np.zeros((n, n))
+    for i in range(n):  # at knot i the curve is (P[i-1] + 4 P[i] + P[i+1]) / 6
+        basis[i, [(i - 1) % n, i, (i + 1) % n]] = [1 / 6, 4 / 6, 1 / 6]
+    return np.linalg.solve(basis, points)
+
+
+def design_cushion(contact: Contact, axis: np.ndarray, up: np.ndarray, apex: np.ndarray, params: CushionParams = CushionParams()) -> Cushion:
+    """The cushion on a seal: `axis` the mask axis (unit, out of the face), `up` the head's up
+    direction, `apex` the point the cushion must clear (the nose tip), all in the scan frame (mm)."""
+    rim = closed_resample(contact.curve, AROUND)
+    normals = closed_resample(contact.normals, AROUND)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    rim = rim - params.interference_mm * normals
+    centre = rim.mean(axis=0)
+    out = _outward(rim, centre, normals)
+    ring = _frame_ring(rim, centre, axis, up, apex, contact.mask, params)
+    f = params.flange_mm
+    rows = [rim + f * (a * out + b * normals) for a, b in FLANGE_PROFILE]  # the seal flange, along the skin
+    base = rows[-1]
+    for t in WALL_STEPS:  # the wall, up to the frame ring
+        lift = base + ((ring - base) @ np.outer(axis, axis))
+        rows.append((1 - t) ** 2 * base + 2 * t * (1 - t) * lift + t**2 * ring)
+    control = np.stack(rows, axis=1)  # (AROUND, ROWS, 3)
+    control = np.stack([periodic_interpolation(control[:, j]) for j in range(ROWS)], axis=1)
+    return Cushion(contact.mask, control, axis, up, params)
+
+
+def _outward(rim: np.ndarray, centre: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, 3) unit directions in the skin's tangent plane pointing away from the seal's centre.
+    Radial rather than across the curve: the seal is star-shaped about its centre, so flanges
+    laid out radially never cross where the curve bends inwards (beside the nostrils)."""
+    radial = rim - centre
+    radial -= np.einsum("ij,ij->i", radial, normals)[:, None] * normals
+    return radial / np.linalg.norm(radial, axis=1, keepdims=True)
+
+
+def _frame_ring(rim, centre, axis, up, apex, mask: str, params: CushionParams) -> np.ndarray:
+    """(N, 3) points of the frame's elliptic ring matched to the rim points by angle about the axis."""
+    up = up - (up @ axis) * axis
+    up /= np.linalg.norm(up)
+    side = np.cross(up, axis)
+    height = max(float((rim @ axis).max()), float(apex @ axis)) + params.frame_clearance_mm
+    origin = centre + (height - centre @ axis) * axis
+    rel = rim - centre
+    angle = np.arctan2(rel @ up, rel @ side)
+    width, tall = FRAME_RING_MM[mask]
+    return origin + np.outer(0.5 * width * np.cos(angle), side) + np.outer(0.5 * tall * np.sin(angle), up)

@@ -1,0 +1,42 @@
+"""Gaps between a cushion's rim and the scanned skin, where the scan has data."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from ..align.correspondences import boundary_vertices, grid_boundary
+from ..frozen import freeze_arrays
+from ..scan import Scan
+
+
+@dataclass(frozen=True)
+class RimGap:
+    """gap: (K,) mm from each rim point to the scan surface; covered: (K,) the scan has data under
+    the point (its closest scan point is not on a rim or hole of the scan)."""
+
+    gap: np.ndarray
+    covered: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    def summary(self) -> dict:
+        g = self.gap[self.covered]
+        return {
+            "rim_gap_median_mm": float(np.median(g)) if len(g) else None,
+            "rim_gap_max_mm": float(g.max()) if len(g) else None,
+            "rim_covered_fraction": float(self.covered.mean()),
+        }
+
+
+def rim_gap(rim: np.ndarray, scan: Scan) -> RimGap:
+    """Distances from (K, 3) rim points to the scan (mm), and where the scan covers them."""
+    if scan.is_point_cloud:
+        dist, _ = cKDTree(scan.vertices).query(rim)
+        return RimGap(dist, np.ones(len(rim), dtype=bool))
+    mesh = trimesh.Trimesh(scan.vertices, scan.faces, process=False)
+    _, dist, tri = trimesh.proximity.closest_point(mesh, rim)
+    rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
+    return RimGap(dist, ~rims[scan.faces[tri]].any(axis=1))

@@ -1,0 +1,91 @@
+"""Contact transfer, the NURBS cushion, the printable solid and `cpapfit design` on synthetic subjects."""
+
+import io
+import json
+import re
+import zipfile
+
+import manifold3d
+import numpy as np
+import pytest
+import trimesh
+
+from cpapfit.contact import template_curve
+from cpapfit.cushion.nurbs import AROUND, ROWS
+from cpapfit.export import threemf_bytes
+from cpapfit.io import load_scan
+from cpapfit.io.capture import capture_files
+from cpapfit.io.write import write_files
+from cpapfit.phantom import make_phantom
+from cpapfit.pipeline import design
+from cpapfit.template import load_template
+
+WIDTH_MM = {"nasal": (40.0, 60.0), "oronasal": (80.0, 110.0)}
+
+
+@pytest.fixture(scope="module", params=[(3, "nasal"), (3, "oronasal"), (2, "nasal"), (2, "oronasal")], ids=str)
+def designed(request, tmp_path_factory):
+    seed, mask = request.param
+    ph = make_phantom(seed)
+    folder = tmp_path_factory.mktemp(f"design{seed}{mask}")
+    write_files(folder, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    return ph, design(load_scan(folder), mask)
+
+
+def test_solid_is_watertight_and_manifold_with_walls_of_the_set_thickness(designed):
+    _, d = designed
+    solid = d.solid
+    assert solid.is_watertight and solid.is_winding_consistent and solid.volume > 0
+    m = manifold3d.Manifold(manifold3d.Mesh(vert_properties=solid.vertices.astype(np.float32), tri_verts=solid.faces.astype(np.uint32)))
+    assert m.status() == manifold3d.Error.NoError
+    assert m.volume() == pytest.approx(solid.volume, rel=1e-4)  # trimesh and manifold3d agree
+    assert d.checks["min_wall_mm"] >= 0.95 * d.cushion.params.wall_mm
+
+
+def test_rim_lies_on_the_scan(designed):
+    """Fit before compression, where the scan has data under the rim."""
+    _, d = designed
+    rim = d.rim.summary()
+    assert rim["rim_covered_fraction"] > 0.5
+    assert rim["rim_gap_median_mm"] <= 0.2 and rim["rim_gap_max_mm"] <= 0.5
+
+
+def test_seal_curve_follows_the_true_anatomy(designed):
+    ph, d = designed
+    tri, bary = template_curve(d.contact.mask)
+    true = np.einsum("kj,kjc->kc", bary, ph.surface[load_template().faces[tri]])
+    assert np.linalg.norm(d.contact.curve - true, axis=1).mean() < 3.0  # mm (registration's tangential error)
+
+
+def test_adult_dimensions_and_256_control_points(designed):
+    _, d = designed
+    assert d.cushion.control.shape == (AROUND, ROWS, 3) and AROUND * ROWS == 256
+    side = np.cross(d.cushion.up, d.cushion.axis)
+    width = np.ptp(d.solid.vertices @ side)
+    lo, hi = WIDTH_MM[d.contact.mask]
+    assert lo <= width <= hi
+
+
+def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
+    out = tmp_path / "out"
+    code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--out", out)
+    assert code == 0, err
+    names = {p.name for p in out.iterdir()}
+    assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json"}
+    curve = json.loads((out / "contact_curve.json").read_text())
+    pts = np.array(curve["points"])
+    assert curve["units"] == "mm" and pts.shape[1] == 3
+    steps = np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]), axis=0), axis=1)
+    assert steps.max() < 5 * np.median(steps)  # ordered around a closed loop: no jumps, first joins last
+    stl = trimesh.load(out / "cushion.stl")
+    assert stl.is_watertight
+    fit = json.loads((out / "fit.json").read_text())
+    assert fit["units"] == "mm" and fit["mask"] == "oronasal" and fit["cushion"]["watertight"]
+
+
+def test_3mf_is_in_millimetres_and_deterministic(designed):
+    _, d = designed
+    a, b = threemf_bytes(d.solid, "cushion"), threemf_bytes(d.solid, "cushion")
+    assert a == b
+    model = zipfile.ZipFile(io.BytesIO(a)).read("3D/3dmodel.model").decode()
+    assert re.search(r'unit="millimeter"', model)
