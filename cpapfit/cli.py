@@ -16,6 +16,7 @@ from .io.landmarks import landmarks_record, read_landmarks
 from .io.phantom import write_phantom
 from .io.write import json_bytes, ply_bytes, png_bytes, write_bytes, write_files
 from .phantom import make_phantom
+from .progress import stage_display
 from .export import stl_bytes, threemf_bytes
 from .pipeline import NOT_BUILT_PARTS, Alignment, Design, align, design, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
@@ -127,9 +128,12 @@ def design_summary(d: Design) -> str:
 
 
 def cmd_design(args) -> int:
-    scan = load_scan(Path(args.scan), args.units)
-    d = design(scan, args.mask, load_user_landmarks(args, scan))
-    written = write_files(Path(args.out), design_files(d, scan))
+    with stage_display(args.quiet, args.verbose) as on_stage:
+        on_stage("reading the scan")
+        scan = load_scan(Path(args.scan), args.units)
+        d = design(scan, args.mask, load_user_landmarks(args, scan), on_stage=on_stage)
+        on_stage("writing files")
+        written = write_files(Path(args.out), design_files(d, scan))
     info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
     info(f"not built yet: {', '.join(NOT_BUILT_PARTS)}")
     return 0
@@ -243,6 +247,8 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
+            p.add_argument("--quiet", action="store_true", help="no progress display")
+            p.add_argument("--verbose", action="store_true", help="print each stage's time")
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")

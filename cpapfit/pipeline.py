@@ -1,6 +1,7 @@
 """The stages strung together. Each stage is a pure function; this module only sequences them."""
 
 from dataclasses import dataclass
+from typing import Callable
 
 from .align.check import FaceCheck
 from .align.initial import initial_alignment
@@ -79,14 +80,28 @@ class Design:
     rim: RimGap
 
 
-def design(scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams()) -> Design:
-    """Scan to checked printable cushion: align, register, carry the seal over, design, thicken, check."""
+def _silent(stage: str) -> None:
+    """The default stage callback: nothing."""
+
+
+def design(
+    scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
+    on_stage: Callable[[str], None] = _silent,
+) -> Design:
+    """Scan to checked printable cushion: align, register, carry the seal over, design, thicken,
+    check. `on_stage(name)` is called as each stage starts (for progress displays)."""
     template = load_template()
+    on_stage("landmarks and similarity")
     al = align(scan, user_landmarks)
+    on_stage("non-rigid registration")
     reg = register_template(scan, al)
+    on_stage("contact")
     contact = transfer_contact(template, reg.vertices, scan, mask)
+    on_stage("cushion")
     axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
     cushion = design_cushion(contact, axis, up, reg.vertices[4], params)
+    on_stage("solid and checks")
     solid, wall = cushion_solid(cushion, contact.normals)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
+    on_stage("fit before compression")
     return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan))

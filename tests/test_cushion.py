@@ -68,8 +68,9 @@ def test_adult_dimensions_and_256_control_points(designed):
 
 def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     out = tmp_path / "out"
-    code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--out", out)
+    code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--verbose", "--out", out)
     assert code == 0, err
+    assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
     names = {p.name for p in out.iterdir()}
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json"}
     curve = json.loads((out / "contact_curve.json").read_text())

@@ -17,17 +17,24 @@ def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
     outer = grid + thickness_mm * normals
+    vertices = np.concatenate([grid.reshape(-1, 3), outer.reshape(-1, 3)])
     n = n_u * n_v
-    faces = np.concatenate([
-        _sheet_faces(n_u, n_v),  # inner sheet
-        _sheet_faces(n_u, n_v) + n,  # outer sheet
-        _cap(n_u, n_v, 0, n),  # the rim at the face
-        _cap(n_u, n_v, n_v - 1, n),  # the ring at the frame
-    ])  # winding made consistent and outward below
-    solid = trimesh.Trimesh(np.concatenate([grid.reshape(-1, 3), outer.reshape(-1, 3)]), faces, process=False)
-    trimesh.repair.fix_winding(solid)
-    trimesh.repair.fix_inversion(solid)
+    sheet, rim, ring = _sheet_faces(n_u, n_v), _cap(n_u, n_v, 0, n), _cap(n_u, n_v, n_v - 1, n)
+    for flip_sheet, flip_rim in ((False, False), (False, True), (True, False), (True, True)):
+        faces = np.concatenate([  # the two sheets wound oppositely, and the two caps
+            _oriented(sheet, flip_sheet), _oriented(sheet + n, not flip_sheet),
+            _oriented(rim, flip_rim), _oriented(ring, not flip_rim),
+        ])
+        solid = trimesh.Trimesh(vertices, faces, process=False)
+        if solid.is_winding_consistent:
+            break
+    if solid.volume < 0:
+        solid.invert()
     return solid
+
+
+def _oriented(faces: np.ndarray, flip: bool) -> np.ndarray:
+    return faces[:, ::-1] if flip else faces
 
 
 def _sheet_faces(n_u: int, n_v: int) -> np.ndarray:
@@ -55,22 +62,24 @@ def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_
     offset = target
     for _ in range(3):
         solid = thicken(grid, offset, hint)
-        wall = thinnest_wall(grid, solid.vertices[n_u * n_v:], offset)
+        wall = thinnest_wall(grid, solid.vertices[n_u * n_v:])
         if wall >= target:
             break
         offset *= 1.02 * target / max(wall, 0.25 * target)
     return solid, wall
 
 
-def thinnest_wall(grid: np.ndarray, outer: np.ndarray, wall_mm: float) -> float:
-    """Least distance (mm) from the outer sheet's points to the inner sheet (an (n_u, n_v, 3) grid):
-    exact closest points for the candidates a k-d tree on the grid finds within reach."""
+def thinnest_wall(grid: np.ndarray, outer: np.ndarray) -> float:
+    """Least distance (mm) from the outer sheet's points (offsets of the (n_u, n_v, 3) grid, in the
+    same order) to the inner sheet. A point whose nearest grid vertex is its own base point lies
+    over a smooth stretch, and its wall is its offset; the others (bends, folds) get the exact
+    closest point on the inner sheet."""
     n_u, n_v, _ = grid.shape
-    near, _ = cKDTree(grid.reshape(-1, 3)).query(outer)
-    spacing = float(np.linalg.norm(np.diff(grid, axis=1), axis=-1).max())
-    suspect = near < wall_mm + spacing
-    if not suspect.any():
-        return float(near.min())
-    inner = trimesh.Trimesh(grid.reshape(-1, 3), _sheet_faces(n_u, n_v), process=False)
-    _, dist, _ = trimesh.proximity.closest_point(inner, outer[suspect])
-    return float(min(dist.min(), near[~suspect].min(initial=np.inf)))
+    base = grid.reshape(-1, 3)
+    near, idx = cKDTree(base).query(outer)
+    suspect = idx != np.arange(len(base))
+    walls = np.linalg.norm(outer - base, axis=1)
+    if suspect.any():
+        inner = trimesh.Trimesh(base, _sheet_faces(n_u, n_v), process=False)
+        _, walls[suspect], _ = trimesh.proximity.closest_point(inner, outer[suspect])
+    return float(walls.min())
