@@ -105,6 +105,11 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
         "cushion": {**mask_dimensions(d), **d.checks},
         "fit_before_compression": d.rim.summary(),
+        "seated_along_mask_axis": {
+            "about": "each cushion, rigid, pushed along the mask axis until its rim first touches the skin; "
+                     "gap = rim to skin along the axis (mm); generic = the same design on the template, placed by the similarity",
+            **{name: s.summary() for name, s in d.seated.items()},
+        },
         "parameters": dict(vars(d.cushion.params)),
         "not_built_yet": list(NOT_BUILT_PARTS),
     }
@@ -120,10 +125,12 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
 def design_summary(d: Design) -> str:
     """One line on a designed cushion."""
     dims, rim = mask_dimensions(d), d.rim.summary()
+    generic = d.seated["generic"].summary()
     return (
         f"{d.contact.mask} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
         f"watertight, thinnest wall {d.checks['min_wall_mm']:.2f} mm, rim-to-skin gap median {rim['rim_gap_median_mm']:.2f} mm, "
-        f"max {rim['rim_gap_max_mm']:.2f} mm"
+        f"max {rim['rim_gap_max_mm']:.2f} mm (generic cushion seated: median {generic['seated_gap_median_mm']:.1f} mm, "
+        f"max {generic['seated_gap_max_mm']:.1f} mm)"
     )
 
 

@@ -9,7 +9,8 @@ from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_solid
-from .evaluate.gap import RimGap, rim_gap
+from .cushion.generic import place, template_cushion
+from .evaluate.gap import RimGap, rim_gap, seat
 from .export import check_solid
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
@@ -22,7 +23,7 @@ STAGES = (
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
 BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export"}
-NOT_BUILT_PARTS = ("casting mould (issue 5)", "generic cushion (issue 5)", "pressure and leak (issue 6)")
+NOT_BUILT_PARTS = ("casting mould (issue 5)", "pressure and leak (issue 6)")
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,7 @@ class Design:
     solid: object  # trimesh.Trimesh, checked
     checks: dict
     rim: RimGap
+    seated: dict  # {"custom": Seating, "generic": Seating}: both cushions pushed onto the face
 
 
 def _silent(stage: str) -> None:
@@ -104,4 +106,6 @@ def design(
     solid, wall = cushion_solid(cushion, contact.normals)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
     on_stage("fit before compression")
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan))
+    generic = place(template_cushion(mask, params), al.similarity)
+    seated = {name: seat(c.grid(256, 2)[:, 0], axis, scan) for name, c in (("custom", cushion), ("generic", generic))}
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan), seated)

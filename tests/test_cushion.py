@@ -82,6 +82,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert stl.is_watertight
     fit = json.loads((out / "fit.json").read_text())
     assert fit["units"] == "mm" and fit["mask"] == "oronasal" and fit["cushion"]["watertight"]
+    assert set(fit["seated_along_mask_axis"]) == {"about", "custom", "generic"}
 
 
 def test_3mf_is_in_millimetres_and_deterministic(designed):
@@ -90,3 +91,12 @@ def test_3mf_is_in_millimetres_and_deterministic(designed):
     assert a == b
     model = zipfile.ZipFile(io.BytesIO(a)).read("3D/3dmodel.model").decode()
     assert re.search(r'unit="millimeter"', model)
+
+
+def test_generic_cushion_is_placed_and_its_gaps_reported(designed):
+    """The stock design, ideally sized and seated on the same face, leaves real gaps; the custom one does not."""
+    _, d = designed
+    custom, generic = (d.seated[k].summary() for k in ("custom", "generic"))
+    assert generic["rim_covered_fraction"] > 0.5 and custom["rim_covered_fraction"] > 0.5
+    assert custom["seated_gap_median_mm"] < 1.0  # along the axis: steep skin beside the nose inflates it
+    assert generic["seated_gap_median_mm"] > custom["seated_gap_median_mm"]
