@@ -118,6 +118,7 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "contact_curve.json": json_bytes({"units": "mm", "mask": d.contact.mask, "points": np.round(d.contact.curve, 4).tolist()}),
         "cushion.stl": stl_bytes(d.solid),
         "cushion.3mf": threemf_bytes(d.solid, "cushion"),
+        **{f"{name}.stl": stl_bytes(part) for name, part in d.mould_parts.items()},
         "fit.json": json_bytes(fit),
     }
 
@@ -163,7 +164,7 @@ def cmd_demo(args) -> int:
     summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
     summaries["cushion"] = design_summary(d)
-    summaries["export"] = f"{len(written)} files in {out / 'design'} (STL, 3MF, PLY, JSON); casting mould not built yet"
+    summaries["export"] = f"{len(written)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
     print(f"stages not built yet: {', '.join(missing_stages())}; parts not built yet: {', '.join(NOT_BUILT_PARTS)}.")

@@ -14,6 +14,13 @@ class SolidError(CpapfitError):
     """A designed solid failed a printability check: nothing is written."""
 
 
+def check_closed(mesh: trimesh.Trimesh, name: str) -> None:
+    """A part must be watertight, consistently wound, a valid manifold and of positive volume."""
+    m = manifold3d.Manifold(manifold3d.Mesh(vert_properties=mesh.vertices.astype(np.float32), tri_verts=mesh.faces.astype(np.uint32)))
+    if not (mesh.is_watertight and mesh.is_winding_consistent and m.status() == manifold3d.Error.NoError and mesh.volume > 0):
+        raise SolidError(f"{name} is not a closed solid (watertight {mesh.is_watertight}, manifold {m.status().name}); nothing was written")
+
+
 def check_solid(mesh: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name: str) -> dict:
     """Check a solid before it is written: watertight and consistently wound (trimesh), a valid
     manifold (manifold3d), positive volume, and its measured thinnest wall `wall_mm` at least

@@ -11,7 +11,8 @@ from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_solid
 from .cushion.generic import place, template_cushion
 from .evaluate.gap import RimGap, rim_gap, seat
-from .export import check_solid
+from .export import check_solid, check_closed
+from .mould import mould
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
@@ -23,7 +24,7 @@ STAGES = (
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
 BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export"}
-NOT_BUILT_PARTS = ("casting mould (issue 5)", "pressure and leak (issue 6)")
+NOT_BUILT_PARTS = ("pressure and leak (issue 6)",)
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,7 @@ class Design:
     checks: dict
     rim: RimGap
     seated: dict  # {"custom": Seating, "generic": Seating}: both cushions pushed onto the face
+    mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
 
 
 def _silent(stage: str) -> None:
@@ -105,7 +107,11 @@ def design(
     on_stage("solid and checks")
     solid, wall = cushion_solid(cushion, contact.normals)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
+    on_stage("casting mould")
+    parts = mould(cushion, solid).parts
+    for name, part in parts.items():
+        check_closed(part, name)
     on_stage("fit before compression")
     generic = place(template_cushion(mask, params), al.similarity)
     seated = {name: seat(c.grid(256, 2)[:, 0], axis, scan) for name, c in (("custom", cushion), ("generic", generic))}
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan), seated)
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan), seated, parts)

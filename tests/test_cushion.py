@@ -72,7 +72,8 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert code == 0, err
     assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
     names = {p.name for p in out.iterdir()}
-    assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json"}
+    assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
+                     "mould_left.stl", "mould_right.stl", "mould_core.stl"}
     curve = json.loads((out / "contact_curve.json").read_text())
     pts = np.array(curve["points"])
     assert curve["units"] == "mm" and pts.shape[1] == 3
@@ -100,3 +101,30 @@ def test_generic_cushion_is_placed_and_its_gaps_reported(designed):
     assert generic["rim_covered_fraction"] > 0.5 and custom["rim_covered_fraction"] > 0.5
     assert custom["seated_gap_median_mm"] < 1.0  # along the axis: steep skin beside the nose inflates it
     assert generic["seated_gap_median_mm"] > custom["seated_gap_median_mm"]
+
+
+def test_mould_encloses_exactly_the_cushion(designed):
+    """Assembled, the mould halves and core leave a cavity (inside the plug) equal to the cushion,
+    and no part reaches into another (points sampled inside each part lie in no other part;
+    parts touch along shared faces, where an intersection volume would only measure rounding)."""
+    from cpapfit.mould import plug, to_manifold
+
+    _, d = designed
+    parts = d.mould_parts
+    for part in parts.values():
+        assert part.is_watertight and part.volume > 0
+    left, right, core = (to_manifold(parts[k]) for k in ("mould_left", "mould_right", "mould_core"))
+    cushion = to_manifold(d.solid)
+    block = (left + right + core).hull()
+    cavity = (block - left - right - core) ^ (to_manifold(plug(d.cushion.grid(128, 24))) + cushion)
+    assert cavity.volume() == pytest.approx(cushion.volume(), rel=0.01)
+    rng = np.random.default_rng(0)
+    for name, part in parts.items():
+        lo, hi = part.bounds
+        candidates = rng.uniform(lo, hi, (6000, 3))
+        inside = candidates[part.contains(candidates)]  # rejection sampling: points inside the part
+        assert len(inside) > 100
+        for other_name, other in parts.items():
+            if other_name != name:
+                assert other.contains(inside).mean() < 0.005, (name, other_name)
+        assert d.solid.contains(inside).mean() < 0.005  # and none of the mould is inside the cushion

@@ -48,11 +48,11 @@ def boundary_vertices(n_vertices: int, faces: np.ndarray) -> np.ndarray:
 
 
 def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
-    """The lookup structure for a scan. A mesh scan twice as coarse as `spacing_mm` is subdivided first, so
-    that its nearest vertex is close to its nearest surface point."""
+    """The lookup structure for a scan. A mesh scan twice as coarse as `spacing_mm` is subdivided
+    first (to edges of 1.5 spacing_mm), so that its nearest vertex is near its nearest surface point."""
     vertices, faces, normals = scan.vertices, scan.faces, scan.normals
     if not scan.is_capture and len(faces) and _median_edge(vertices, faces) > 2.0 * spacing_mm:
-        vertices, faces = trimesh.remesh.subdivide_to_size(vertices, faces, max_edge=spacing_mm)
+        vertices, faces = trimesh.remesh.subdivide_to_size(vertices, faces, max_edge=1.5 * spacing_mm)
         normals = _subdivided_normals(scan, vertices, faces)
     tree = None if use_grid else cKDTree(vertices)
     boundary = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(vertices), faces)

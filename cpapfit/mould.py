@@ -1,0 +1,90 @@
+"""A two-part casting mould with a core for a silicone cushion (booleans with manifold3d).
+
+The cushion's sheet with its two openings capped, united with the cushion, is the "plug". The
+core is the plug minus the cushion (it fills the tube's opening); the outer mould is a block around the plug
+minus the plug, split in two along the plane through the mask axis and the head's up direction
+so that each half comes off sideways. A pour spout and vents run from the block's top (the
+frame side) into the cavity, and two keys on the parting face (bumps on one half, sockets with
+clearance on the other) register the halves.
+"""
+
+from dataclasses import dataclass
+
+import manifold3d as m3
+import numpy as np
+import trimesh
+
+from .cushion.nurbs import Cushion
+from .cushion.solid import _sheet_faces
+
+MARGIN_MM = 8.0  # mould wall around the cushion
+SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
+KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
+
+
+@dataclass(frozen=True)
+class Mould:
+    """The mould parts as trimesh solids: {"mould_left", "mould_right", "mould_core"}."""
+
+    parts: dict
+
+
+def to_manifold(mesh: trimesh.Trimesh) -> m3.Manifold:
+    return m3.Manifold(m3.Mesh(vert_properties=mesh.vertices.astype(np.float32), tri_verts=mesh.faces.astype(np.uint32)))
+
+
+def to_trimesh(m: m3.Manifold) -> trimesh.Trimesh:
+    mesh = m.to_mesh()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
+
+
+def plug(grid: np.ndarray) -> trimesh.Trimesh:
+    """The solid inside the cushion's sheet (an (n_u, n_v, 3) grid), both openings capped by fans."""
+    n_u, n_v, _ = grid.shape
+    pts = grid.reshape(-1, 3)
+    rim_c, ring_c = grid[:, 0].mean(axis=0), grid[:, -1].mean(axis=0)
+    vertices = np.vstack([pts, rim_c, ring_c])
+    i = np.arange(n_u)
+    rim = np.stack([i * n_v, ((i + 1) % n_u) * n_v, np.full(n_u, len(pts))], axis=1)
+    ring = np.stack([((i + 1) % n_u) * n_v + n_v - 1, i * n_v + n_v - 1, np.full(n_u, len(pts) + 1)], axis=1)
+    mesh = trimesh.Trimesh(vertices, np.concatenate([_sheet_faces(n_u, n_v), rim, ring]), process=False)
+    trimesh.repair.fix_normals(mesh)
+    return mesh
+
+
+def mould(cushion: Cushion, solid: trimesh.Trimesh, n_u: int = 128, n_v: int = 24) -> Mould:
+    """The mould parts for a cushion whose printable solid is `solid` (same sampling)."""
+    axis, up = cushion.axis, cushion.up - (cushion.up @ cushion.axis) * cushion.axis
+    up /= np.linalg.norm(up)
+    side = np.cross(up, axis)
+    frame = np.stack([side, up, axis])  # rows: the mould's x, y, z in scan coordinates
+    cushion_m = to_manifold(solid)
+    filled = to_manifold(plug(cushion.grid(n_u, n_v))) + cushion_m  # the union: the cushion is wholly inside
+    core = filled - cushion_m
+    local = solid.vertices @ frame.T
+    lo, hi = local.min(axis=0) - MARGIN_MM, local.max(axis=0) + MARGIN_MM
+    to_scan = np.eye(4)
+    to_scan[:3, :3] = frame.T
+    block = m3.Manifold.cube(hi - lo).translate(lo).transform(to_scan[:3])
+    outer = block - filled
+    top = hi[2]
+    centre = (lo + hi) / 2
+    ring_local = cushion.grid(n_u, n_v)[:, -1] @ frame.T
+    channels = [_channel(ring_local[0], top, SPOUT_MM, to_scan)] + [
+        _channel(ring_local[k], top, VENT_MM, to_scan) for k in (n_u // 4, n_u // 2, 3 * n_u // 4)
+    ]
+    for ch in channels:
+        outer = outer - ch
+    left, right = outer.split_by_plane(side.tolist(), float(side @ (frame.T @ centre)))
+    for y in (lo[1] + MARGIN_MM / 2, hi[1] - MARGIN_MM / 2):  # in the mould wall's corners, clear of the plug
+        at = frame.T @ np.array([centre[0], y, lo[2] + MARGIN_MM / 2])
+        key = m3.Manifold.sphere(KEY_MM, 32).translate(at)
+        left, right = left + key, right - m3.Manifold.sphere(KEY_MM + KEY_CLEARANCE_MM, 32).translate(at)
+    return Mould({"mould_left": to_trimesh(left), "mould_right": to_trimesh(right), "mould_core": to_trimesh(core)})
+
+
+def _channel(start_local: np.ndarray, top: float, diameter: float, to_scan: np.ndarray) -> m3.Manifold:
+    """A vertical cylinder (along the mask axis) from a point of the cavity to the block's top."""
+    height = top - start_local[2] + 1.0
+    cyl = m3.Manifold.cylinder(height, diameter / 2, diameter / 2, 32)
+    return cyl.translate(start_local.tolist()).transform(to_scan[:3])
