@@ -114,8 +114,12 @@ def test_commands_not_built_yet_say_so_and_write_nothing(cli, tmp_path, phantom1
     assert not out.exists()
 
 
-def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir):
-    """Seed 1's nasal cushion bends tighter than its wall (bench/RESULTS.md): refused, not written."""
+def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, monkeypatch):
+    """Demand walls thicker than the design can give: the check refuses, and no file is written."""
+    import cpapfit.pipeline as pipeline
+    from cpapfit.export import check_solid
+
+    monkeypatch.setattr(pipeline, "check_solid", lambda mesh, wall, _min, name: check_solid(mesh, wall, 2 * wall, name))
     out = tmp_path / "out"
     assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "printability", "min_wall_mm")
     assert not out.exists() or not any(out.iterdir())

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from geomdl import NURBS
+from scipy.ndimage import gaussian_filter1d
 
 from ..contact import Contact, closed_resample
 from ..frozen import freeze_arrays
@@ -19,9 +20,10 @@ AROUND, ROWS, DEGREE = 32, 8, 3
 # The flange's rows in units of the flange width: (outwards across the seal, up off the skin).
 # Row 0 is the seal curve; the flange turns up gently so that the wall never bends tighter than
 # its own thickness.
-FLANGE_PROFILE = ((0.0, 0.0), (0.45, 0.0), (0.9, 0.35), (1.2, 1.2))
-WALL_STEPS = (0.1, 0.3, 0.6, 1.0)  # the wall's rows along its curve: close together where it leaves the flange
-FRAME_RING_MM = {"nasal": (48.0, 46.0), "oronasal": (82.0, 98.0)}  # (width, height) of the frame ring
+FLANGE_PROFILE = ((0.0, 0.0), (0.45, 0.0), (0.9, 0.4), (1.15, 1.5))
+WALL_STEPS = (0.12, 0.32, 0.62, 1.0)  # the wall's rows along its curve: close together where it leaves the flange
+WALL_SMOOTHING = 1.0  # periodic Gaussian (in control columns) on the wall rows: no tight corners around the wall
+FRAME_RING_MM = {"nasal": (48.0, 46.0), "oronasal": (86.0, 98.0)}  # (width, height) of the frame ring
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,8 @@ def design_cushion(contact: Contact, axis: np.ndarray, up: np.ndarray, apex: np.
         lift = base + ((ring - base) @ np.outer(axis, axis))
         rows.append((1 - t) ** 2 * base + 2 * t * (1 - t) * lift + t**2 * ring)
     control = np.stack(rows, axis=1)  # (AROUND, ROWS, 3)
+    wall = len(FLANGE_PROFILE) - 1
+    control[:, wall:] = gaussian_filter1d(control[:, wall:], WALL_SMOOTHING, axis=0, mode="wrap")
     control = np.stack([periodic_interpolation(control[:, j]) for j in range(ROWS)], axis=1)
     return Cushion(contact.mask, control, axis, up, params)
 
