@@ -1,6 +1,7 @@
 """Printable solids: checks before anything is written, and the file formats (STL, 3MF in mm)."""
 
 import io
+import re
 import zipfile
 
 import manifold3d
@@ -57,8 +58,6 @@ def threemf_bytes(mesh: trimesh.Trimesh, name: str) -> bytes:
 
 
 def _fixed_uuids(model: bytes) -> bytes:
-    import re
-
     seen: dict[bytes, bytes] = {}
 
     def fixed(match):

@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 
 from .cushion.nurbs import Cushion
-from .cushion.solid import _sheet_faces
+from .cushion.solid import sheet_faces
 
 MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
@@ -47,7 +47,7 @@ def plug(grid: np.ndarray) -> trimesh.Trimesh:
     i = np.arange(n_u)
     rim = np.stack([i * n_v, ((i + 1) % n_u) * n_v, np.full(n_u, len(pts))], axis=1)
     ring = np.stack([((i + 1) % n_u) * n_v + n_v - 1, i * n_v + n_v - 1, np.full(n_u, len(pts) + 1)], axis=1)
-    mesh = trimesh.Trimesh(vertices, np.concatenate([_sheet_faces(n_u, n_v), rim, ring]), process=False)
+    mesh = trimesh.Trimesh(vertices, np.concatenate([sheet_faces(n_u, n_v), rim, ring]), process=False)
     trimesh.repair.fix_normals(mesh)
     return mesh
 

@@ -112,6 +112,7 @@ def design(
     for name, part in parts.items():
         check_closed(part, name)
     on_stage("fit before compression")
-    generic = place(template_cushion(mask, params), al.similarity)
-    seated = {name: seat(c.grid(256, 2)[:, 0], axis, scan) for name, c in (("custom", cushion), ("generic", generic))}
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(cushion.grid(256, 2)[:, 0], scan), seated, parts)
+    rim = cushion.grid(256, 2)[:, 0]
+    generic_rim = place(template_cushion(mask, params), al.similarity).grid(256, 2)[:, 0]
+    seated = {"custom": seat(rim, axis, scan), "generic": seat(generic_rim, axis, scan)}
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(rim, scan), seated, parts)

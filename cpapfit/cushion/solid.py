@@ -12,14 +12,14 @@ def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray
     """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` to the
     side away from the face (`face_normals_hint`: (n_u, 3) skin normals along the v=0 edge)."""
     n_u, n_v, _ = grid.shape
-    sheet = trimesh.Trimesh(grid.reshape(-1, 3), _sheet_faces(n_u, n_v), process=False)
+    sheet = trimesh.Trimesh(grid.reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
     normals = np.array(sheet.vertex_normals).reshape(n_u, n_v, 3)
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
     outer = grid + thickness_mm * normals
     vertices = np.concatenate([grid.reshape(-1, 3), outer.reshape(-1, 3)])
     n = n_u * n_v
-    sheet, rim, ring = _sheet_faces(n_u, n_v), _cap(n_u, n_v, 0, n), _cap(n_u, n_v, n_v - 1, n)
+    sheet, rim, ring = sheet_faces(n_u, n_v), _cap(n_u, n_v, 0, n), _cap(n_u, n_v, n_v - 1, n)
     for flip_sheet, flip_rim in ((False, False), (False, True), (True, False), (True, True)):
         faces = np.concatenate([  # the two sheets wound oppositely, and the two caps
             _oriented(sheet, flip_sheet), _oriented(sheet + n, not flip_sheet),
@@ -37,7 +37,7 @@ def _oriented(faces: np.ndarray, flip: bool) -> np.ndarray:
     return faces[:, ::-1] if flip else faces
 
 
-def _sheet_faces(n_u: int, n_v: int) -> np.ndarray:
+def sheet_faces(n_u: int, n_v: int) -> np.ndarray:
     """Two triangles per grid cell, u wrapping around."""
     i, j = np.meshgrid(np.arange(n_u), np.arange(n_v - 1), indexing="ij")
     a = i * n_v + j
@@ -80,6 +80,6 @@ def thinnest_wall(grid: np.ndarray, outer: np.ndarray) -> float:
     suspect = idx != np.arange(len(base))
     walls = np.linalg.norm(outer - base, axis=1)
     if suspect.any():
-        inner = trimesh.Trimesh(base, _sheet_faces(n_u, n_v), process=False)
+        inner = trimesh.Trimesh(base, sheet_faces(n_u, n_v), process=False)
         _, walls[suspect], _ = trimesh.proximity.closest_point(inner, outer[suspect])
     return float(walls.min())
