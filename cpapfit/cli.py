@@ -11,14 +11,16 @@ import numpy as np
 
 from . import __version__
 from .errors import CpapfitError, NotAvailableError
+from .evaluate.fit import FitParams
 from .io import load_scan
 from .io.landmarks import landmarks_record, read_landmarks
-from .io.design import design_files, mask_dimensions, registration_ply
+from .io.cushion import load_cushion
+from .io.design import design_files, evaluation_record, mask_dimensions, registration_ply
 from .io.phantom import write_phantom
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .phantom import make_phantom
 from .progress import stage_display
-from .pipeline import NOT_BUILT_PARTS, Alignment, Design, align, design, missing_stages, register_template, stage_table
+from .pipeline import Alignment, Design, align, design, evaluate, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -81,13 +83,26 @@ def cmd_register(args) -> int:
 def design_summary(d: Design) -> str:
     """One line on a designed cushion."""
     dims, rim = mask_dimensions(d), d.rim.summary()
-    generic = d.seated["generic"].summary()
     return (
         f"{d.contact.mask} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
-        f"watertight, thinnest wall {d.checks['min_wall_mm']:.2f} mm, rim-to-skin gap median {rim['rim_gap_median_mm']:.2f} mm, "
-        f"max {rim['rim_gap_max_mm']:.2f} mm (generic cushion seated: median {generic['seated_gap_median_mm']:.1f} mm, "
-        f"max {generic['seated_gap_max_mm']:.1f} mm)"
+        f"watertight, thinnest wall {d.checks['min_wall_mm']:.2f} mm, rim-to-skin gap before pre-load median "
+        f"{rim['rim_gap_median_mm']:.2f} mm, max {rim['rim_gap_max_mm']:.2f} mm"
     )
+
+
+def fit_summary(fits: dict, cpap_cmh2o: float) -> str:
+    """One line per cushion: pressure, window, leak at the headgear force."""
+    lines = []
+    for name, fit in fits.items():
+        s = fit.summary()
+        cv = "n/a" if s["pressure_cv"] is None else f"{s['pressure_cv']:.2f}"
+        seal = "does not seal" if s["seal_force_n"] is None else f"seals from {s['seal_force_n']:.1f} N"
+        lines.append(
+            f"{name} at {fit.force_n:.1f} N, {cpap_cmh2o:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
+            f"CV {cv}, max {s['pressure_max_kpa']:.2f} kPa ({s['pressure_max_mmhg']:.0f} mmHg, {s['pressure_max_region']}), "
+            f"{100 * s['window_fraction']:.0f} % in the safe window, leak {s['leak_l_min']:.2f} L/min, {seal}"
+        )
+    return "; ".join(lines)
 
 
 def cmd_design(args) -> int:
@@ -98,7 +113,27 @@ def cmd_design(args) -> int:
         on_stage("writing files")
         written = write_files(Path(args.out), design_files(d, scan))
     info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
-    info(f"not built yet: {', '.join(NOT_BUILT_PARTS)}")
+    info(fit_summary(d.fits, d.fit_params.cpap_cmh2o))
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    if args.generic and not args.mask:
+        raise CpapfitError("--generic needs --mask nasal|oronasal: which stock cushion to compare with")
+    if not 0 < args.cpap <= 30:
+        raise CpapfitError(f"--cpap {args.cpap:g} cmH2O: CPAP pressures run from about 4 to 20 cmH2O")
+    if args.force is not None and not 0 < args.force <= 200:
+        raise CpapfitError(f"--force {args.force:g} N: a headgear force is a few to a few tens of newtons")
+    scan = load_scan(Path(args.scan), args.units)
+    cushion = load_cushion(Path(args.cushion))
+    params = FitParams(cpap_cmh2o=args.cpap)
+    al = align(scan, load_user_landmarks(args, scan))
+    reg = register_template(scan, al)
+    fits = evaluate(scan, al, reg, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
+    record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
+              **evaluation_record(fits, params)}
+    write_bytes(Path(args.out), json_bytes(record))
+    info(f"{scan.units_note}; {fit_summary(fits, params.cpap_cmh2o)} -> {args.out}")
     return 0
 
 
@@ -119,10 +154,11 @@ def cmd_demo(args) -> int:
     summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
     summaries["cushion"] = design_summary(d)
+    summaries["evaluate"] = fit_summary(d.fits, d.fit_params.cpap_cmh2o)
     summaries["export"] = f"{len(written)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
-    print(f"stages not built yet: {', '.join(missing_stages())}; parts not built yet: {', '.join(NOT_BUILT_PARTS)}.")
+    print(f"stages not built yet: {', '.join(missing_stages()) or 'none'}.")
     return 0
 
 
@@ -206,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("scan", help=scan_help)
         p.add_argument("--out", required=True, help=out_help)
         p.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m"], help=units_help)
-        if name in ("design", "register", "landmarks"):
+        if name in ("design", "register", "landmarks", "evaluate"):
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
@@ -214,8 +250,11 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--verbose", action="store_true", help="print each stage's time")
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
-            p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
-        p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design}.get(name, not_available(name)))
+            p.add_argument("--generic", action="store_true", help="also evaluate the generic (stock) cushion of --mask")
+            p.add_argument("--mask", choices=["nasal", "oronasal"], help="the stock cushion for --generic")
+            p.add_argument("--force", type=float, help="headgear force in N (default: the force recommended for this cushion)")
+            p.add_argument("--cpap", type=float, default=10.0, help="CPAP pressure in cmH2O (default 10)")
+        p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design, "evaluate": cmd_evaluate}[name])
 
     p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
     p.add_argument("input_dir")

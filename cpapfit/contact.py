@@ -44,12 +44,15 @@ class Contact:
         freeze_arrays(self)
 
 
-def closed_resample(points: np.ndarray, n: int) -> np.ndarray:
-    """(n, 3) points evenly spaced by arc length along a closed polyline (K, 3)."""
+def closed_resample(points: np.ndarray, n: int, values: np.ndarray | None = None) -> np.ndarray:
+    """n stations evenly spaced by arc length along a closed polyline (K, 3): the (n, 3) points
+    there, or, given `values` (K, ...) carried by the points, those values interpolated there."""
     loop = np.vstack([points, points[:1]])
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(loop, axis=0), axis=1))])
     t = np.linspace(0.0, s[-1], n, endpoint=False)
-    return np.stack([np.interp(t, s, loop[:, k]) for k in range(3)], axis=1)
+    data = loop if values is None else np.concatenate([values, values[:1]]).reshape(len(loop), -1)
+    out = np.stack([np.interp(t, s, column) for column in data.T], axis=1)
+    return out.reshape((n,) + (loop.shape[1:] if values is None else np.shape(values)[1:]))
 
 
 @lru_cache(maxsize=4)

@@ -3,14 +3,18 @@
 from dataclasses import dataclass
 from typing import Callable
 
+import numpy as np
+import trimesh
+
 from .align.check import FaceCheck
 from .align.initial import initial_alignment
 from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
-from .cushion.solid import cushion_solid
+from .cushion.solid import cushion_sheet, cushion_solid
 from .cushion.generic import place, template_cushion
-from .evaluate.gap import RimGap, rim_gap, seat
+from .evaluate.fit import CushionFit, FitParams, compensating_preload, fit_cushion
+from .evaluate.gap import RimGap, rim_gap
 from .export import check_solid, check_closed
 from .mould import mould
 from .align.similarity import Similarity
@@ -23,8 +27,7 @@ STAGES = (
     ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
-BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export"}
-NOT_BUILT_PARTS = ("pressure and leak (issue 6)",)
+BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate"}
 
 
 @dataclass(frozen=True)
@@ -79,9 +82,11 @@ class Design:
     cushion: Cushion
     solid: object  # trimesh.Trimesh, checked
     checks: dict
-    rim: RimGap
-    seated: dict  # {"custom": Seating, "generic": Seating}: both cushions pushed onto the face
+    rim: RimGap  # the rim before its pressure-compensating pre-load, against the scan
+    preload_mm: np.ndarray  # (K,) along the seal curve: rim set into the skin along the axis
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
+    fits: dict  # {"custom" | "generic": CushionFit}, both at the custom cushion's recommended force
+    fit_params: FitParams
 
 
 def _silent(stage: str) -> None:
@@ -90,20 +95,22 @@ def _silent(stage: str) -> None:
 
 def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
-    on_stage: Callable[[str], None] = _silent,
+    fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent,
 ) -> Design:
-    """Scan to checked printable cushion: align, register, carry the seal over, design, thicken,
-    check. `on_stage(name)` is called as each stage starts (for progress displays)."""
-    template = load_template()
+    """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
+    design with a pressure-compensating pre-load, thicken, check, mould, then press the custom and
+    the generic cushion onto the face. `on_stage(name)` is called as each stage starts."""
     on_stage("landmarks and similarity")
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
     reg = register_template(scan, al)
     on_stage("contact")
-    contact = transfer_contact(template, reg.vertices, scan, mask)
+    contact = transfer_contact(load_template(), reg.vertices, scan, mask)
     on_stage("cushion")
     axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
-    cushion = design_cushion(contact, axis, up, reg.vertices[4], params)
+    preload = compensating_preload(contact.curve, contact.normals, axis, reg.vertices, fit_params)
+    cushion = design_cushion(contact, axis, up, reg.vertices[4], params, preload)
+    neutral = design_cushion(contact, axis, up, reg.vertices[4], params)
     on_stage("solid and checks")
     solid, wall = cushion_solid(cushion, contact.normals)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
@@ -111,8 +118,23 @@ def design(
     parts = mould(cushion, solid).parts
     for name, part in parts.items():
         check_closed(part, name)
-    on_stage("fit before compression")
-    rim = cushion.grid(256, 2)[:, 0]
-    generic_rim = place(template_cushion(mask, params), al.similarity).grid(256, 2)[:, 0]
-    seated = {"custom": seat(rim, axis, scan), "generic": seat(generic_rim, axis, scan)}
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(rim, scan), seated, parts)
+    on_stage("pressure and leak")
+    fits = evaluate(scan, al, reg, solid, mask, params, fit_params)
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan), preload, parts, fits, fit_params)
+
+
+def evaluate(
+    scan: Scan, al: Alignment, reg: Registration, custom: trimesh.Trimesh, generic_mask: str | None,
+    params: CushionParams = CushionParams(), fit_params: FitParams = FitParams(), force_n: float | None = None,
+) -> dict[str, CushionFit]:
+    """Stage evaluate: a cushion mesh ("custom") and, for a `generic_mask`, the generic cushion (the
+    same design on the template, placed by the similarity) pressed onto the face at the same
+    headgear force (`force_n`, or the one the custom cushion is designed for)."""
+    scan_mesh = trimesh.Trimesh(scan.vertices, scan.faces, process=False)
+    axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
+    face = trimesh.Trimesh(reg.vertices, load_template().faces, process=False)
+    fits = {"custom": fit_cushion(custom, scan_mesh, face, axis, up, params.flange_mm, force_n, fit_params)}
+    if generic_mask:
+        generic = cushion_sheet(place(template_cushion(generic_mask, params), al.similarity))
+        fits["generic"] = fit_cushion(generic, scan_mesh, face, axis, up, params.flange_mm, fits["custom"].force_n, fit_params)
+    return fits

@@ -5,7 +5,11 @@ from pathlib import Path
 import pytest
 
 from cpapfit.cli import main
+from cpapfit.io import load_scan
+from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_phantom
+from cpapfit.io.write import write_files
+from cpapfit.pipeline import design
 from cpapfit.phantom import make_phantom
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -23,6 +27,16 @@ def phantom1_dir(tmp_path_factory, phantom1):
     folder = tmp_path_factory.mktemp("phantom1")
     write_phantom(phantom1, folder)
     return folder
+
+
+@pytest.fixture(scope="session", params=[(3, "nasal"), (3, "oronasal"), (2, "nasal"), (2, "oronasal")], ids=str)
+def designed(request, tmp_path_factory):
+    """(phantom, Design) for two synthetic subjects and both masks."""
+    seed, mask = request.param
+    ph = make_phantom(seed)
+    folder = tmp_path_factory.mktemp(f"design{seed}{mask}")
+    write_files(folder, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    return ph, design(load_scan(folder), mask)
 
 
 @pytest.fixture

@@ -25,7 +25,8 @@ def test_demo_runs_every_built_stage_and_says_what_is_missing(cli, tmp_path):
     assert code == 0
     assert "RGB-D capture 640x480" in out
     assert "landmarks   built" in out and "by image" in out
-    assert "cushion     built" in out and "evaluate    NOT BUILT" in out and "stages not built yet:" in out
+    assert "cushion     built" in out and "evaluate    built" in out and "report      NOT BUILT" in out
+    assert "safe window" in out and "stages not built yet: report" in out
     assert (tmp_path / "subject" / "depth.png").is_file()
     assert Image.open(tmp_path / "template_regions.png").size == (640, 480)
     assert (tmp_path / "design" / "cushion.stl").is_file() and (tmp_path / "residual.png").is_file()
@@ -109,8 +110,8 @@ def test_missing_intrinsics_and_truncated_depth(cli, capture):
 
 
 def test_commands_not_built_yet_say_so_and_write_nothing(cli, tmp_path, phantom1_dir):
-    out = tmp_path / "fit.json"
-    assert_one_line_error(*cli("evaluate", phantom1_dir, "--cushion", "c.stl", "--out", out), "not available yet", "evaluate")
+    out = tmp_path / "batch"
+    assert_one_line_error(*cli("batch", phantom1_dir.parent, "--out", out), "not available yet", "batch")
     assert not out.exists()
 
 

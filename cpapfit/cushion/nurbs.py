@@ -84,13 +84,20 @@ def periodic_interpolation(points: np.ndarray) -> np.ndarray:
     return np.linalg.solve(basis, points)
 
 
-def design_cushion(contact: Contact, axis: np.ndarray, up: np.ndarray, apex: np.ndarray, params: CushionParams = CushionParams()) -> Cushion:
+def design_cushion(
+    contact: Contact, axis: np.ndarray, up: np.ndarray, apex: np.ndarray, params: CushionParams = CushionParams(),
+    preload_mm: np.ndarray | None = None,
+) -> Cushion:
     """The cushion on a seal: `axis` the mask axis (unit, out of the face), `up` the head's up
-    direction, `apex` the point the cushion must clear (the nose tip), all in the scan frame (mm)."""
+    direction, `apex` the point the cushion must clear (the nose tip), all in the scan frame (mm).
+    `preload_mm` (K,): per seal-curve point, how far the rim is set into the skin along the axis
+    (pressure compensation), on top of the uniform interference along the skin normal."""
     rim = closed_resample(contact.curve, AROUND)
-    normals = closed_resample(contact.normals, AROUND)
+    normals = closed_resample(contact.curve, AROUND, contact.normals)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     rim = rim - params.interference_mm * normals
+    if preload_mm is not None:
+        rim = rim - np.outer(closed_resample(contact.curve, AROUND, preload_mm), axis)
     centre = rim.mean(axis=0)
     out = _outward(rim, centre, normals)
     ring = _frame_ring(rim, centre, axis, up, apex, contact.mask, params)

@@ -52,6 +52,11 @@ def _cap(n_u: int, n_v: int, j: int, offset: int) -> np.ndarray:
     return np.concatenate([np.stack([a, a + offset, b], -1), np.stack([b, a + offset, b + offset], -1)])
 
 
+def cushion_sheet(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Trimesh:
+    """The cushion's face-side surface (no thickness) as a mesh: enough to find where it meets the face."""
+    return trimesh.Trimesh(cushion.grid(n_u, n_v).reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
+
+
 def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 24) -> tuple[trimesh.Trimesh, float]:
     """(the printable cushion, its thinnest wall in mm). The NURBS surface is sampled and thickened
     away from the face; where the wall bends, an offset thins it on the inside of the bend, so

@@ -5,7 +5,9 @@ import numpy as np
 from .. import __version__
 from ..align.nonrigid import Registration
 from ..export import stl_bytes, threemf_bytes
-from ..pipeline import NOT_BUILT_PARTS, Design
+from ..evaluate.fit import FitParams
+from ..evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
+from ..pipeline import Design
 from ..scan import Scan
 from ..template import load_template
 from .write import json_bytes, ply_bytes
@@ -26,6 +28,31 @@ def mask_dimensions(d: Design) -> dict:
     return {f"{k}_mm": round(float(np.ptp(v @ a)), 2) for k, a in (("width", side), ("height", up), ("depth", axis))}
 
 
+def evaluation_record(fits: dict, params: FitParams) -> dict:
+    """The evaluate stage's part of fit.json: custom (and generic) cushions at one headgear force."""
+    custom = fits["custom"]
+    return {
+        "cpap_cmh2o": params.cpap_cmh2o,
+        "headgear_force_n": round(custom.force_n, 3),
+        "headgear_force_about": "recommended: the force at which a cushion compensated for this face presses every covered rim "
+                                "point with the target pressure while balancing the CPAP load; every cushion here is evaluated at it",
+        "window": params.describe(),
+        **{name: fit.summary() for name, fit in fits.items()},
+        "tissue_model": params.tissue.describe(),
+        "mechanics": {
+            "model": "rigid mask on an elastic foundation; equilibrium of force along the mask axis and moments across it; "
+                     "contact band = seal flange width; gaps and indentations along the axis, pressures normal to the skin",
+            "contact_width_mm": custom.contact_width_mm,
+            "pressure_stats_over": "rim points over scanned skin (rim_covered_fraction of the rim); zero where not in contact",
+        },
+        "leak_model": {
+            "model": "seal open where contact pressure < CPAP pressure, opening (P - p) / k; flow = min(lubrication h^3 dP ds / "
+                     "(12 mu L), orifice Cd h ds sqrt(2 dP / rho)), L = seal flange width",
+            "air_viscosity_pa_s": AIR_VISCOSITY_PA_S, "air_density_kg_m3": AIR_DENSITY_KG_M3, "discharge_coefficient": DISCHARGE_COEFFICIENT,
+        },
+    }
+
+
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}."""
     reg = d.registration
@@ -38,13 +65,14 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
         "cushion": {**mask_dimensions(d), **d.checks},
         "fit_before_compression": d.rim.summary(),
-        "seated_along_mask_axis": {
-            "about": "each cushion, rigid, pushed along the mask axis until its rim first touches the skin; "
-                     "gap = rim to skin along the axis (mm); generic = the same design on the template, placed by the similarity",
-            **{name: s.summary() for name, s in d.seated.items()},
+        "pressure_compensation": {
+            "target_kpa": d.fit_params.target_kpa,
+            "preload_mm": {k: round(float(f(d.preload_mm)), 3) for k, f in (("min", np.min), ("median", np.median), ("max", np.max))},
+            "about": "the rim is set into the skin along the mask axis by more where the tissue is soft, so that at the "
+                     "recommended headgear force it presses evenly",
         },
+        **evaluation_record(d.fits, d.fit_params),
         "parameters": dict(vars(d.cushion.params)),
-        "not_built_yet": list(NOT_BUILT_PARTS),
     }
     return {
         "registered_template.ply": registration_ply(reg),

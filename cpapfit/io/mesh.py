@@ -17,7 +17,7 @@ NORMAL_NEIGHBOURS = 16
 
 def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     """Read a mesh or point-cloud file into a `Scan` in millimetres (the file's own frame)."""
-    geom = _read(path)
+    geom = read_geometry(path)
     vertices = np.asarray(geom.vertices, dtype=np.float64)
     faces = np.asarray(getattr(geom, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
     _check(path, vertices, faces)
@@ -31,7 +31,7 @@ def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     )
 
 
-def _read(path: Path):
+def read_geometry(path: Path):
     """One trimesh geometry (Trimesh or PointCloud) from a file, or an InputError."""
     path = Path(path)
     if not path.is_file():

@@ -1,0 +1,160 @@
+"""A cushion on a face under load: rim pressure, leak, the safety window, the force that seals;
+and the pre-load that makes the custom cushion press evenly (pressure compensation)."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+from scipy.ndimage import gaussian_filter1d
+
+from ..frozen import freeze_arrays
+from .leak import leak_l_min
+from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, press
+from .rim import RimContact, find_rim
+from .tissue import Stiffness, TissueModel, stiffness
+
+KPA_PER_CMH2O = 0.0980665
+PRELOAD_SMOOTHING = 3.0  # Gaussian, in seal-curve samples (of 128: ~2 % of the loop)
+MMHG_PER_KPA = 7.50062
+
+
+@dataclass(frozen=True)
+class FitParams:
+    """CPAP pressure (cmH2O); the safe window runs from the CPAP pressure plus `margin_kpa` up to
+    the capillary closing pressure (`capillary_kpa`, 32 mmHg); `target_kpa`: the even rim pressure
+    the compensated cushion is designed for; `max_force_n`: highest headgear force searched."""
+
+    cpap_cmh2o: float = 10.0
+    margin_kpa: float = 0.2
+    capillary_kpa: float = 4.3
+    target_kpa: float = 2.5
+    max_force_n: float = 60.0
+    tissue: TissueModel = field(default_factory=TissueModel)
+
+    @property
+    def cpap_kpa(self) -> float:
+        return self.cpap_cmh2o * KPA_PER_CMH2O
+
+    @property
+    def window_kpa(self) -> tuple[float, float]:
+        return self.cpap_kpa + self.margin_kpa, self.capillary_kpa
+
+    def describe(self) -> dict:
+        lo, hi = self.window_kpa
+        return {"cpap_cmh2o": self.cpap_cmh2o, "cpap_kpa": round(self.cpap_kpa, 4), "window_kpa": [round(lo, 4), hi],
+                "window_mmhg": [round(lo * MMHG_PER_KPA, 2), round(hi * MMHG_PER_KPA, 2)], "target_kpa": self.target_kpa}
+
+
+@dataclass(frozen=True)
+class CushionFit:
+    """One cushion pressed onto the face at `force_n` N of headgear.
+
+    rim: the contact line (K points); stiffness: the tissue under it; pressure_kpa (K,) contact
+    pressure, opening_mm (K,) seal opening, leak_l_min (K,) flow through it (NaN where the rim is
+    not over scanned skin); pressed: the equilibrium over the covered points; seal_force_n: the
+    least headgear force with no opening on the covered rim (None: not below max_force_n);
+    contact_width_mm: the seal flange width (the contact band across the rim); window_kpa: the
+    safe pressure window (low, high)."""
+
+    rim: RimContact
+    stiffness: Stiffness
+    pressure_kpa: np.ndarray
+    opening_mm: np.ndarray
+    leak_l_min: np.ndarray
+    pressed: Pressed
+    force_n: float
+    seal_force_n: float | None
+    contact_width_mm: float
+    window_kpa: tuple
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    def summary(self) -> dict:
+        """The numbers of fit.json for this cushion (over the covered rim)."""
+        c = self.rim.covered
+        p = self.pressure_kpa[c]
+        lo, hi = self.window_kpa
+        top = int(np.argmax(p))
+        gap = self.rim.clearance[c] - self.rim.clearance[c].min()
+        return {
+            "contact_fraction": float((p > 0).mean()),
+            "pressure_mean_kpa": float(p.mean()),
+            "pressure_cv": float(p.std() / p.mean()) if p.mean() > 0 else None,
+            "pressure_max_kpa": float(p[top]),
+            "pressure_max_mmhg": float(p[top] * MMHG_PER_KPA),
+            "pressure_max_region": self.stiffness.region[np.flatnonzero(c)[top]],
+            "window_fraction": float(((p >= lo) & (p <= hi)).mean()),
+            "leak_l_min": float(self.leak_l_min[c].sum()),
+            "seal_force_n": self.seal_force_n,
+            "rim_covered_fraction": float(c.mean()),
+            "gap_before_load_median_mm": float(np.median(gap)),
+            "gap_before_load_max_mm": float(gap.max()),
+            "shift_under_load_mm": self.pressed.shift_mm,
+            "tilt_deg": np.degrees(np.arctan(self.pressed.tilt)).round(3).tolist(),
+            "lifted_off": self.pressed.lifted,
+        }
+
+
+def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float) -> Pressed:
+    """`press` over the covered points of a rim."""
+    c = rim.covered
+    return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa)
+
+
+def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
+    """Least headgear force (N) at which no covered rim point opens (bisection), or None."""
+    lo = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
+    hi = params.max_force_n
+    if _press_rim(rim, k, width_mm, hi, params.cpap_kpa).opening_mm.max() > 0:
+        return None
+    while hi - lo > tol_n:
+        mid = 0.5 * (lo + hi)
+        opened = _press_rim(rim, k, width_mm, mid, params.cpap_kpa).opening_mm.max() > 0
+        lo, hi = (mid, hi) if opened else (lo, mid)
+    return hi
+
+
+def recommended_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams) -> float:
+    """Headgear force (N) that holds the target pressure over the whole covered rim and balances the
+    CPAP load: what a cushion compensated for this face needs."""
+    c = rim.covered
+    cos = np.maximum(rim.cos[c], COS_MIN)
+    contact = params.target_kpa * width_mm * rim.ds[c] @ cos
+    return float((contact + params.cpap_kpa * rim.sealed_area_mm2) * N_PER_KPA_MM2)
+
+
+def fit_cushion(
+    cushion: trimesh.Trimesh, scan_mesh: trimesh.Trimesh, face_mesh: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray,
+    width_mm: float, force_n: float | None, params: FitParams = FitParams(),
+) -> CushionFit:
+    """A cushion mesh (mm, scan frame) pressed onto the scanned face along the unit mask `axis`
+    at `force_n` N (None: the recommended force for this rim); `face_mesh`: the registered
+    template (template vertex order), which finds the rim and tells the tissue under it."""
+    rim = find_rim(cushion, scan_mesh, face_mesh, axis, up)
+    k = stiffness(rim.points, np.asarray(face_mesh.vertices), params.tissue)
+    force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
+    pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)
+    c = rim.covered
+    leak = leak_l_min(pressed.opening_mm, rim.ds[c], width_mm, params.cpap_kpa)
+    sealing = seal_force(rim, k.effective, width_mm, params)
+    full = [_spread(c, a) for a in (pressed.pressure_kpa, pressed.opening_mm, leak)]
+    return CushionFit(rim, k, *full, pressed, force, sealing, width_mm, params.window_kpa)
+
+
+def _spread(covered: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(K,) values on the covered points, NaN elsewhere."""
+    out = np.full(len(covered), np.nan)
+    out[covered] = values
+    return out
+
+
+def compensating_preload(curve: np.ndarray, normals: np.ndarray, axis: np.ndarray, warped: np.ndarray, params: FitParams = FitParams()) -> np.ndarray:
+    """(K,) mm to set each seal point (K, 3) into the skin along the axis so that, pushed home,
+    every point presses with the target pressure: soft tissue gets more pre-load, the stiff
+    nasal bridge none; smoothed along the curve (PRELOAD_SMOOTHING samples) so the rim never bends
+    tighter than its wall. `normals` (K, 3) skin normals; `warped` the registered template."""
+    k = stiffness(curve, warped, params.tissue).effective
+    need = params.target_kpa / (k * np.maximum(np.abs(normals @ axis), COS_MIN))  # axial indentation, mm
+    need = gaussian_filter1d(need, PRELOAD_SMOOTHING, mode="wrap")
+    return need - need.min()

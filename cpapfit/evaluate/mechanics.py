@@ -1,0 +1,73 @@
+"""The mask as a rigid body on an elastic face: equilibrium under headgear and CPAP.
+
+Rim point i, pushed along the mask axis by a_i = d + tilt . uv_i - clearance_i (mm; d the
+mask's shift towards the face, tilt (2,) its slopes across the axis), indents the skin along
+its normal by a_i * cos_i and presses back with p_i = k_i * a_i * cos_i (kPa) over the contact
+area A_i = flange width * ds_i; along the axis that is a spring of stiffness k_i A_i cos_i^2.
+The headgear force F (N) pushes along the axis through the centroid of the contact band
+(weighted by A_i cos_i); the CPAP pressure P over the sealed area pushes the mask off, taken
+through the same line. The equilibrium minimises the convex energy
+    sum_i 1/2 k_i A_i cos_i^2 max(a_i, 0)^2 - (F - P * sealed area) * d,
+i.e. force balance along the axis and moment balance about the two axes across it.
+Where p_i < P the air lifts the seal open by (P - p_i) / k_i (normal, mm).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import minimize
+
+from ..frozen import freeze_arrays
+
+COS_MIN = 0.2  # skin steeper than ~78 degrees to the axis is treated as 78 degrees
+N_PER_KPA_MM2 = 1e-3
+
+
+@dataclass(frozen=True)
+class Pressed:
+    """The mask at equilibrium: shift_mm along the axis (from first touch), tilt (2,) slopes;
+    pressure_kpa (K,) contact pressure on the skin; opening_mm (K,) seal opening (0: closed);
+    lifted: the CPAP load exceeds the headgear force (no contact can hold)."""
+
+    shift_mm: float
+    tilt: np.ndarray
+    pressure_kpa: np.ndarray
+    opening_mm: np.ndarray
+    lifted: bool
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+
+def press(clearance, cos, area_mm2, k, uv, sealed_area_mm2: float, force_n: float, cpap_kpa: float) -> Pressed:
+    """Equilibrium of a rim of K points (arrays (K,), uv (K, 2), all covered) under `force_n` N
+    of headgear and `cpap_kpa` over `sealed_area_mm2`; k (K,) kPa/mm normal stiffness."""
+    cos = np.maximum(cos, COS_MIN)
+    spring = k * area_mm2 * cos**2 * N_PER_KPA_MM2  # N/mm along the axis
+    net = force_n - cpap_kpa * sealed_area_mm2 * N_PER_KPA_MM2
+    centre = (area_mm2 * cos) @ uv / (area_mm2 @ cos)  # the load's line of action: the contact band's centroid
+    basis = np.column_stack([np.ones(len(clearance)), uv - centre])
+    touch = float(clearance.min())
+    if net <= 0:
+        along = touch - clearance
+        return _pressed(along, cos, k, cpap_kpa, 0.0, np.zeros(2), lifted=True)
+    ridge = 1e-9 * float(spring.sum()) * np.diag([0.0, *np.mean(uv**2, axis=0)])  # pins the tilt of a rim touching at one point
+
+    def energy(x):
+        a = np.maximum(basis @ x - clearance, 0.0)
+        return 0.5 * spring @ a**2 - net * x[0] + 0.5 * x @ ridge @ x, basis.T @ (spring * a) - [net, 0, 0] + ridge @ x
+
+    def hessian(x):
+        on = basis @ x > clearance
+        return (basis[on].T * spring[on]) @ basis[on] + ridge
+
+    x = minimize(energy, np.array([touch, 0.0, 0.0]), jac=True, hess=hessian, method="trust-exact",
+                 options={"gtol": 1e-9 * max(net, 1.0)}).x
+    return _pressed(basis @ x - clearance, cos, k, cpap_kpa, float(x[0] - touch), x[1:], lifted=False)
+
+
+def _pressed(along, cos, k, cpap_kpa, shift, tilt, lifted) -> Pressed:
+    """Pressures and openings from axial indentations `along` (K,) mm."""
+    normal = along * cos
+    return Pressed(shift, np.asarray(tilt, dtype=float), np.maximum(k * normal, 0.0),
+                   np.maximum(cpap_kpa / k - normal, 0.0), lifted)

@@ -1,0 +1,86 @@
+"""The soft-tissue model: an elastic foundation (Winkler) with per-region stiffness, in series
+with the cushion's own compliance.
+
+Each facial region is a layer of soft tissue of Young's modulus E (kPa) and thickness h (mm)
+over bone; as a Winkler foundation it presses back p = (E / h) * indentation. E values are the
+literature's indentation figures (cheek ~16, below the cheekbone ~27, chin ~53, cheekbone
+~65 kPa); thicknesses are typical soft-tissue depths over bone. Over the nasal bones the layer
+is only ~3 mm thick, so the bridge is stiff per unit depth: the classic pressure sore.
+Regions are anchored on template landmarks and blended smoothly (Gaussian in the template's
+mm), so any point of the face gets a stiffness. The cushion's seal flange is a spring in series
+(kPa per mm of flange compression, an effective value to be calibrated on a cast cushion).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..frozen import freeze_arrays
+from ..template import load_template
+
+# region: (E kPa, tissue thickness mm, anchor landmarks on the template)
+REGIONS = {
+    "nasal bridge": (40.0, 3.0, (6, 168, 197, 195, 5)),
+    "side of the nose": (25.0, 8.0, (129, 358, 48, 278)),
+    "upper lip": (20.0, 12.0, (2, 164, 0, 37, 267)),
+    "cheek": (16.0, 15.0, (36, 266, 100, 329, 205, 425)),
+    "below the cheekbone": (27.0, 14.0, (187, 411, 147, 376, 212, 432, 214, 434)),
+    "cheekbone": (65.0, 7.0, (116, 345, 123, 352, 50, 280)),
+    "chin": (53.0, 10.0, (18, 200, 199, 175, 152, 135, 364)),
+}
+
+
+@dataclass(frozen=True)
+class TissueModel:
+    """Parameters of the tissue and cushion springs (kPa, mm). `regions`: name -> (E kPa,
+    thickness mm, template landmark anchors); `blend_mm`: Gaussian width of the blending between
+    anchors; `cushion_kpa_per_mm`: effective stiffness of the seal flange per unit contact area."""
+
+    regions: dict = field(default_factory=lambda: dict(REGIONS))
+    blend_mm: float = 8.0
+    cushion_kpa_per_mm: float = 1.0
+
+    def describe(self) -> dict:
+        """The model as it goes into fit.json."""
+        return {
+            "model": "Winkler elastic foundation, k = E / thickness per region, blended between template "
+                     "landmarks, in series with the cushion flange's stiffness",
+            "regions": {name: {"youngs_modulus_kpa": e, "thickness_mm": h, "stiffness_kpa_per_mm": round(e / h, 3)}
+                        for name, (e, h, _) in self.regions.items()},
+            "blend_mm": self.blend_mm,
+            "cushion_kpa_per_mm": self.cushion_kpa_per_mm,
+        }
+
+
+@dataclass(frozen=True)
+class Stiffness:
+    """Per rim point: tissue (K,) kPa/mm, effective (K,) kPa/mm (tissue and cushion in series),
+    region (K,) name of the dominant region."""
+
+    tissue: np.ndarray
+    effective: np.ndarray
+    region: tuple
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+
+def stiffness(points: np.ndarray, warped: np.ndarray, model: TissueModel = TissueModel()) -> Stiffness:
+    """Stiffness under (K, 3) mm points on the patient, located on the face through the registered
+    template `warped` (N, 3) mm (template vertex order)."""
+    template = load_template()
+    _, nearest = cKDTree(warped).query(points)
+    where = template.vertices[nearest]  # the points' places on the template face
+    names = list(model.regions)
+    log_k = np.log([e / h for e, h, _ in model.regions.values()])
+    weight = np.stack([_closeness(where, template.vertices[list(model.regions[n][2])], model.blend_mm) for n in names], axis=1)
+    tissue = np.exp((weight * log_k).sum(axis=1) / weight.sum(axis=1))
+    effective = 1.0 / (1.0 / tissue + 1.0 / model.cushion_kpa_per_mm)
+    return Stiffness(tissue, effective, tuple(names[i] for i in weight.argmax(axis=1)))
+
+
+def _closeness(points: np.ndarray, anchors: np.ndarray, width_mm: float) -> np.ndarray:
+    """(K,) Gaussian weight of the nearest anchor, floored so far points still blend."""
+    d = np.linalg.norm(points[:, None] - anchors[None], axis=2).min(axis=1)
+    return np.exp(-0.5 * (d / width_mm) ** 2) + 1e-12
