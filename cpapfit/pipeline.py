@@ -12,15 +12,18 @@ from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet, cushion_solid
-from .cushion.generic import place, template_cushion
+from .cushion.generic import NOSE_TIP, place, template_cushion
 from .evaluate.fit import CushionFit, FitParams, compensating_preload, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
-from .export import check_solid, check_closed
+from .frozen import freeze_arrays
+from .export import WALL_TOLERANCE, check_closed, check_solid, self_intersecting_edges
 from .mould import mould
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
 from .template import load_template
+
+PRELOAD_SMOOTHING = (3.0, 6.0, 12.0)  # Gaussian widths tried for the pre-load, in seal-curve samples (of 128)
 
 # (stage, issue that builds it); order is the pipeline's.
 STAGES = (
@@ -73,6 +76,17 @@ def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams =
 
 
 @dataclass(frozen=True)
+class Preload:
+    """The compensating pre-load: mm (K,) along the seal curve, and its smoothing (curve samples)."""
+
+    mm: np.ndarray
+    smoothing: float
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+
+@dataclass(frozen=True)
 class Design:
     """A custom cushion for a scan: every stage's result, the printable solid and its checks."""
 
@@ -83,7 +97,7 @@ class Design:
     solid: object  # trimesh.Trimesh, checked
     checks: dict
     rim: RimGap  # the rim before its pressure-compensating pre-load, against the scan
-    preload_mm: np.ndarray  # (K,) along the seal curve: rim set into the skin along the axis
+    preload: Preload  # the rim set into the skin along the axis, along the seal curve
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
     fits: dict  # {"custom" | "generic": CushionFit}, both at the custom cushion's recommended force
     fit_params: FitParams
@@ -108,11 +122,9 @@ def design(
     contact = transfer_contact(load_template(), reg.vertices, scan, mask)
     on_stage("cushion")
     axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
-    preload = compensating_preload(contact.curve, contact.normals, axis, reg.vertices, fit_params)
-    cushion = design_cushion(contact, axis, up, reg.vertices[4], params, preload)
-    neutral = design_cushion(contact, axis, up, reg.vertices[4], params)
+    neutral = design_cushion(contact, axis, up, reg.vertices[NOSE_TIP], params)
     on_stage("solid and checks")
-    solid, wall = cushion_solid(cushion, contact.normals)
+    cushion, preload, solid, wall = compensated_cushion(contact, axis, up, reg.vertices, params, fit_params)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
     on_stage("casting mould")
     parts = mould(cushion, solid).parts
@@ -123,6 +135,21 @@ def design(
     return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan), preload, parts, fits, fit_params)
 
 
+def compensated_cushion(
+    contact: Contact, axis: np.ndarray, up: np.ndarray, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
+) -> tuple[Cushion, Preload, trimesh.Trimesh, float]:
+    """The pressure-compensated cushion and its solid, with the sharpest pre-load (least smoothing
+    of PRELOAD_SMOOTHING) whose solid keeps the set wall thickness and does not fold into itself:
+    (cushion, pre-load, solid, wall mm)."""
+    for smoothing in PRELOAD_SMOOTHING:
+        preload = compensating_preload(contact.curve, contact.normals, axis, warped, smoothing, fit_params)
+        cushion = design_cushion(contact, axis, up, warped[NOSE_TIP], params, preload)
+        solid, wall = cushion_solid(cushion, contact.normals)
+        if wall >= WALL_TOLERANCE * params.wall_mm and self_intersecting_edges(solid) == 0:
+            break
+    return cushion, Preload(preload, smoothing), solid, wall
+
+
 def evaluate(
     scan: Scan, al: Alignment, reg: Registration, custom: trimesh.Trimesh, generic_mask: str | None,
     params: CushionParams = CushionParams(), fit_params: FitParams = FitParams(), force_n: float | None = None,
@@ -130,7 +157,7 @@ def evaluate(
     """Stage evaluate: a cushion mesh ("custom") and, for a `generic_mask`, the generic cushion (the
     same design on the template, placed by the similarity) pressed onto the face at the same
     headgear force (`force_n`, or the one the custom cushion is designed for)."""
-    scan_mesh = trimesh.Trimesh(scan.vertices, scan.faces, process=False)
+    scan_mesh = trimesh.PointCloud(scan.vertices) if scan.is_point_cloud else trimesh.Trimesh(scan.vertices, scan.faces, process=False)
     axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
     face = trimesh.Trimesh(reg.vertices, load_template().faces, process=False)
     fits = {"custom": fit_cushion(custom, scan_mesh, face, axis, up, params.flange_mm, force_n, fit_params)}

@@ -105,7 +105,7 @@ def _preload_at(d, points):
     """The design's pre-load (mm) at the seal-curve point nearest each of `points`."""
     from scipy.spatial import cKDTree
 
-    return d.preload_mm[cKDTree(d.contact.curve).query(points)[1]]
+    return d.preload.mm[cKDTree(d.contact.curve).query(points)[1]]
 
 
 def test_mould_encloses_exactly_the_cushion(designed):

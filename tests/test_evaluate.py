@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import Delaunay
 
 from cpapfit.evaluate.fit import FitParams
 from cpapfit.evaluate.leak import leak_l_min
@@ -87,6 +88,19 @@ def test_rim_of_a_flat_ring_on_a_plane():
     assert rim.ds.sum() == pytest.approx(2 * np.pi * RING_MM, rel=0.01)
 
 
+def test_rim_over_a_sloping_point_cloud_measures_the_same_clearance_as_over_its_mesh():
+    """A scan without triangles: the skin under the rim is a plane fitted to the points near the ray."""
+    grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.3), np.arange(-60, 61, 1.3)), -1).reshape(-1, 2)
+    slope = np.column_stack([grid, 0.4 * grid[:, 0]])  # skin rising 0.4 mm per mm towards +x
+    mesh = trimesh.Trimesh(slope, Delaunay(grid).simplices)
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 10).apply_translation((0, 0, 30))
+    axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    over_mesh = find_rim(ring, mesh, mesh, axis, up)
+    over_cloud = find_rim(ring, trimesh.PointCloud(slope), mesh, axis, up)
+    assert over_cloud.covered.all()
+    assert over_cloud.clearance == pytest.approx(over_mesh.clearance, abs=0.05)
+
+
 def test_tissue_over_the_nasal_bones_is_stiffest():
     t = load_template()
     k = stiffness(t.vertices[[6, 205, 152]], t.vertices)  # nasal bridge, cheek, chin
@@ -109,4 +123,4 @@ def test_compensation_evens_out_the_rim_pressure(designed):
     _, d = designed
     p = d.fits["custom"].pressure_kpa[d.fits["custom"].rim.covered]
     assert np.median(p) == pytest.approx(d.fit_params.target_kpa, abs=0.3)
-    assert d.preload_mm.min() == 0.0 and d.preload_mm.max() > 0.5  # soft tissue gets more pre-load
+    assert d.preload.mm.min() == 0.0 and d.preload.mm.max() > 0.5  # soft tissue gets more pre-load

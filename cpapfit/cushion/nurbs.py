@@ -96,8 +96,6 @@ def design_cushion(
     normals = closed_resample(contact.curve, AROUND, contact.normals)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     rim = rim - params.interference_mm * normals
-    if preload_mm is not None:
-        rim = rim - np.outer(closed_resample(contact.curve, AROUND, preload_mm), axis)
     centre = rim.mean(axis=0)
     out = _outward(rim, centre, normals)
     ring = _frame_ring(rim, centre, axis, up, apex, contact.mask, params)
@@ -110,6 +108,9 @@ def design_cushion(
     control = np.stack(rows, axis=1)  # (AROUND, ROWS, 3)
     wall = len(FLANGE_PROFILE) - 1
     control[:, wall:] = gaussian_filter1d(control[:, wall:], WALL_SMOOTHING, axis=0, mode="wrap")
+    if preload_mm is not None:  # the flange moves into the skin; the wall stretches, the frame ring stays
+        weight = np.concatenate([np.ones(len(FLANGE_PROFILE)), 1.0 - np.asarray(WALL_STEPS)])
+        control -= np.einsum("i,j,c->ijc", closed_resample(contact.curve, AROUND, preload_mm), weight, axis)
     control = np.stack([periodic_interpolation(control[:, j]) for j in range(ROWS)], axis=1)
     return Cushion(contact.mask, control, axis, up, params)
 

@@ -2,10 +2,13 @@
 
 import numpy as np
 import trimesh
+from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
 from ..contact import closed_resample
 from .nurbs import Cushion
+
+NORMAL_SMOOTHING = 1.5  # Gaussian over the sheet's normals before offsetting, in grid steps
 
 
 def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray) -> trimesh.Trimesh:
@@ -14,6 +17,8 @@ def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray
     n_u, n_v, _ = grid.shape
     sheet = trimesh.Trimesh(grid.reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
     normals = np.array(sheet.vertex_normals).reshape(n_u, n_v, 3)
+    normals = gaussian_filter(normals, (NORMAL_SMOOTHING, NORMAL_SMOOTHING, 0), mode=("wrap", "nearest", "nearest"))
+    normals /= np.linalg.norm(normals, axis=2, keepdims=True)  # smoothed: the offset does not fold in tight bends
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
     outer = grid + thickness_mm * normals

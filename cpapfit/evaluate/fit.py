@@ -14,7 +14,6 @@ from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
 
 KPA_PER_CMH2O = 0.0980665
-PRELOAD_SMOOTHING = 3.0  # Gaussian, in seal-curve samples (of 128: ~2 % of the loop)
 MMHG_PER_KPA = 7.50062
 
 
@@ -125,7 +124,7 @@ def recommended_force(rim: RimContact, k: np.ndarray, width_mm: float, params: F
 
 
 def fit_cushion(
-    cushion: trimesh.Trimesh, scan_mesh: trimesh.Trimesh, face_mesh: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray,
+    cushion: trimesh.Trimesh, scan_mesh: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray,
     width_mm: float, force_n: float | None, params: FitParams = FitParams(),
 ) -> CushionFit:
     """A cushion mesh (mm, scan frame) pressed onto the scanned face along the unit mask `axis`
@@ -149,12 +148,14 @@ def _spread(covered: np.ndarray, values: np.ndarray) -> np.ndarray:
     return out
 
 
-def compensating_preload(curve: np.ndarray, normals: np.ndarray, axis: np.ndarray, warped: np.ndarray, params: FitParams = FitParams()) -> np.ndarray:
+def compensating_preload(
+    curve: np.ndarray, normals: np.ndarray, axis: np.ndarray, warped: np.ndarray, smoothing: float, params: FitParams = FitParams(),
+) -> np.ndarray:
     """(K,) mm to set each seal point (K, 3) into the skin along the axis so that, pushed home,
     every point presses with the target pressure: soft tissue gets more pre-load, the stiff
-    nasal bridge none; smoothed along the curve (PRELOAD_SMOOTHING samples) so the rim never bends
-    tighter than its wall. `normals` (K, 3) skin normals; `warped` the registered template."""
+    nasal bridge none; smoothed along the curve (Gaussian, `smoothing` samples) so the rim does
+    not bend tighter than its wall. `normals` (K, 3) skin normals; `warped` the registered template."""
     k = stiffness(curve, warped, params.tissue).effective
     need = params.target_kpa / (k * np.maximum(np.abs(normals @ axis), COS_MIN))  # axial indentation, mm
-    need = gaussian_filter1d(need, PRELOAD_SMOOTHING, mode="wrap")
+    need = gaussian_filter1d(need, smoothing, mode="wrap")
     return need - need.min()

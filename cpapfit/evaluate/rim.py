@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..frozen import freeze_arrays
@@ -19,6 +20,8 @@ from ..frozen import freeze_arrays
 SECTORS = 256
 REFINE_MM = 1.0  # longest cushion edge after refinement
 REACH_MM = 60.0  # rays start this far above each vertex, so rims pressed into the skin are found too
+CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
+CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
 TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's rim point
 FACE_MM = 4.0  # scanned skin farther than this from the registered face along the ray: a hole in the scan
 
@@ -59,10 +62,10 @@ def in_plane(axis: np.ndarray, up: np.ndarray) -> np.ndarray:
 
 
 def find_rim(
-    cushion: trimesh.Trimesh, scan_mesh: trimesh.Trimesh, face_mesh: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray,
-    sectors: int = SECTORS,
+    cushion: trimesh.Trimesh, scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray,
+    up: np.ndarray, sectors: int = SECTORS,
 ) -> RimContact:
-    """The contact line of a `cushion` mesh over a `scan_mesh`, both mm in the scan frame. The
+    """The contact line of a `cushion` mesh over a `scan` surface or point cloud, mm, scan frame. The
     rim is found against `face_mesh` (the registered template: the whole face, no holes), its
     clearance is measured against the scan; where the scan's skin is missing or lies farther than
     FACE_MM from the face (a ray through a hole), the point is not covered. `axis`: the unit mask
@@ -78,23 +81,44 @@ def find_rim(
     if len(first) < sectors or not np.isfinite(on_face[first]).all():
         raise InputError("the cushion does not run all the way round the mask axis over the face")
     pts = vertices[first]
-    clearance, skin, _ = _look_down(pts, scan_mesh, axis)
+    clearance, skin = _skin_below(pts, scan, axis)
     clearance[np.abs(clearance - on_face[first]) > FACE_MM] = np.nan
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
 
 
-def _look_down(vertices: np.ndarray, scan_mesh: trimesh.Trimesh, axis: np.ndarray):
-    """(clearance (V,) mm, NaN where no skin; skin points (V, 3); |cos| skin normal to axis (V,))."""
+def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray):
+    """(clearance (V,) mm along the axis to the mesh, NaN where none; hit points (V, 3); |cos| of
+    the mesh normal to the axis (V,))."""
     origins = vertices + REACH_MM * axis
-    loc, ray, tri = scan_mesh.ray.intersects_location(origins, np.tile(-axis, (len(vertices), 1)), multiple_hits=False)
+    loc, ray, tri = mesh.ray.intersects_location(origins, np.tile(-axis, (len(vertices), 1)), multiple_hits=False)
     clearance = np.full(len(vertices), np.nan)
     clearance[ray] = np.linalg.norm(loc - origins[ray], axis=1) - REACH_MM
-    skin = np.full((len(vertices), 3), np.nan)
-    skin[ray] = loc
+    hits = np.full((len(vertices), 3), np.nan)
+    hits[ray] = loc
     cos = np.ones(len(vertices))
-    cos[ray] = np.abs(scan_mesh.face_normals[tri] @ axis)
-    return clearance, skin, cos
+    cos[ray] = np.abs(mesh.face_normals[tri] @ axis)
+    return clearance, hits, cos
+
+
+def _skin_below(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray):
+    """(clearance (K,) mm, skin points (K, 3)) below each point along -axis: the first triangle hit,
+    or for a point cloud a plane fitted to the top layer of scan points within CLOUD_RADIUS_MM of the ray."""
+    if isinstance(scan, trimesh.Trimesh):
+        return _look_down(points, scan, axis)[:2]
+    cloud = np.asarray(scan.vertices)
+    across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]  # two directions across the axis
+    flat, height = cloud @ across, cloud @ axis
+    clearance = np.full(len(points), np.nan)
+    for i, idx in enumerate(cKDTree(flat).query_ball_point(points @ across, CLOUD_RADIUS_MM)):
+        idx = np.asarray(idx, dtype=int)
+        idx = idx[height[idx] < points[i] @ axis + REACH_MM]
+        if len(idx) >= 3:
+            idx = idx[height[idx] > height[idx].max() - CLOUD_LAYER_MM]  # the skin, not what lies behind it
+        if len(idx) >= 3:
+            design = np.column_stack([np.ones(len(idx)), flat[idx] - points[i] @ across])
+            clearance[i] = points[i] @ axis - np.linalg.lstsq(design, height[idx], rcond=None)[0][0]
+    return clearance, points - clearance[:, None] * axis
 
 
 def _arc_lengths(loop: np.ndarray) -> np.ndarray:

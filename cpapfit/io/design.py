@@ -67,7 +67,8 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "fit_before_compression": d.rim.summary(),
         "pressure_compensation": {
             "target_kpa": d.fit_params.target_kpa,
-            "preload_mm": {k: round(float(f(d.preload_mm)), 3) for k, f in (("min", np.min), ("median", np.median), ("max", np.max))},
+            "preload_mm": {k: round(float(f(d.preload.mm)), 3) for k, f in (("min", np.min), ("median", np.median), ("max", np.max))},
+            "preload_smoothing_samples": d.preload.smoothing,
             "about": "the rim is set into the skin along the mask axis by more where the tissue is soft, so that at the "
                      "recommended headgear force it presses evenly",
         },
