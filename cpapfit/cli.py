@@ -20,7 +20,7 @@ from .io.phantom import write_phantom
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .phantom import make_phantom
 from .progress import stage_display
-from .pipeline import Alignment, Design, align, design, evaluate, missing_stages, register_template, stage_table
+from .pipeline import Alignment, Design, align, design, evaluate, face_for, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -129,7 +129,7 @@ def cmd_evaluate(args) -> int:
     params = FitParams(cpap_cmh2o=args.cpap)
     al = align(scan, load_user_landmarks(args, scan))
     reg = register_template(scan, al)
-    fits = evaluate(scan, al, reg, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
+    fits = evaluate(face_for(scan, al, reg), al, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
     write_bytes(Path(args.out), json_bytes(record))

@@ -3,7 +3,6 @@
 from dataclasses import dataclass
 from typing import Callable
 
-import numpy as np
 import trimesh
 
 from .align.check import FaceCheck
@@ -11,19 +10,17 @@ from .align.initial import initial_alignment
 from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
-from .cushion.solid import cushion_sheet, cushion_solid
+from .cushion.solid import cushion_sheet
 from .cushion.generic import NOSE_TIP, place, template_cushion
-from .evaluate.fit import CushionFit, FitParams, compensating_preload, fit_cushion
+from .compensation import Preload, compensated_cushion
+from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
-from .frozen import freeze_arrays
-from .export import WALL_TOLERANCE, check_closed, check_solid, self_intersecting_edges
+from .export import check_closed, check_solid
 from .mould import mould
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
 from .template import load_template
-
-PRELOAD_SMOOTHING = (3.0, 6.0, 12.0)  # Gaussian widths tried for the pre-load, in seal-curve samples (of 128)
 
 # (stage, issue that builds it); order is the pipeline's.
 STAGES = (
@@ -76,17 +73,6 @@ def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams =
 
 
 @dataclass(frozen=True)
-class Preload:
-    """The compensating pre-load: mm (K,) along the seal curve, and its smoothing (curve samples)."""
-
-    mm: np.ndarray
-    smoothing: float
-
-    def __post_init__(self):
-        freeze_arrays(self)
-
-
-@dataclass(frozen=True)
 class Design:
     """A custom cushion for a scan: every stage's result, the printable solid and its checks."""
 
@@ -121,47 +107,35 @@ def design(
     on_stage("contact")
     contact = transfer_contact(load_template(), reg.vertices, scan, mask)
     on_stage("cushion")
-    axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
-    neutral = design_cushion(contact, axis, up, reg.vertices[NOSE_TIP], params)
+    face = face_for(scan, al, reg)
+    neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
     on_stage("solid and checks")
-    cushion, preload, solid, wall = compensated_cushion(contact, axis, up, reg.vertices, params, fit_params)
+    cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
     on_stage("casting mould")
     parts = mould(cushion, solid).parts
     for name, part in parts.items():
         check_closed(part, name)
     on_stage("pressure and leak")
-    fits = evaluate(scan, al, reg, solid, mask, params, fit_params)
+    fits = evaluate(face, al, solid, mask, params, fit_params)
     return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan), preload, parts, fits, fit_params)
 
 
-def compensated_cushion(
-    contact: Contact, axis: np.ndarray, up: np.ndarray, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
-) -> tuple[Cushion, Preload, trimesh.Trimesh, float]:
-    """The pressure-compensated cushion and its solid, with the sharpest pre-load (least smoothing
-    of PRELOAD_SMOOTHING) whose solid keeps the set wall thickness and does not fold into itself:
-    (cushion, pre-load, solid, wall mm)."""
-    for smoothing in PRELOAD_SMOOTHING:
-        preload = compensating_preload(contact.curve, contact.normals, axis, warped, smoothing, fit_params)
-        cushion = design_cushion(contact, axis, up, warped[NOSE_TIP], params, preload)
-        solid, wall = cushion_solid(cushion, contact.normals)
-        if wall >= WALL_TOLERANCE * params.wall_mm and self_intersecting_edges(solid) == 0:
-            break
-    return cushion, Preload(preload, smoothing), solid, wall
+def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
+    """The face cushions are pressed onto: the scan, its registered template, the mask axis (the
+    template's +z carried by the similarity) and the head's up direction (its +y)."""
+    return face_of(scan, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 
 def evaluate(
-    scan: Scan, al: Alignment, reg: Registration, custom: trimesh.Trimesh, generic_mask: str | None,
+    face: Face, al: Alignment, custom: trimesh.Trimesh, generic_mask: str | None,
     params: CushionParams = CushionParams(), fit_params: FitParams = FitParams(), force_n: float | None = None,
 ) -> dict[str, CushionFit]:
     """Stage evaluate: a cushion mesh ("custom") and, for a `generic_mask`, the generic cushion (the
     same design on the template, placed by the similarity) pressed onto the face at the same
     headgear force (`force_n`, or the one the custom cushion is designed for)."""
-    scan_mesh = trimesh.PointCloud(scan.vertices) if scan.is_point_cloud else trimesh.Trimesh(scan.vertices, scan.faces, process=False)
-    axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
-    face = trimesh.Trimesh(reg.vertices, load_template().faces, process=False)
-    fits = {"custom": fit_cushion(custom, scan_mesh, face, axis, up, params.flange_mm, force_n, fit_params)}
+    fits = {"custom": fit_cushion(custom, face, params.flange_mm, force_n, fit_params)}
     if generic_mask:
         generic = cushion_sheet(place(template_cushion(generic_mask, params), al.similarity))
-        fits["generic"] = fit_cushion(generic, scan_mesh, face, axis, up, params.flange_mm, fits["custom"].force_n, fit_params)
+        fits["generic"] = fit_cushion(generic, face, params.flange_mm, fits["custom"].force_n, fit_params)
     return fits

@@ -138,3 +138,19 @@ def test_obj_cut_mid_line(cli, tmp_path, phantom1):
     cut = text.index("\nf ", int(len(text) * 0.8)) + 5  # inside a face line: "f 12"
     (tmp_path / "cut.obj").write_text(text[:cut])
     assert_one_line_error(*cli("inspect", tmp_path / "cut.obj"), "truncated")
+
+
+def test_evaluate_refuses_bad_cushions_and_options_before_any_work(cli, tmp_path, phantom1_dir):
+    out = tmp_path / "fit.json"
+    ring = trimesh.creation.annulus(0.02, 0.025, 0.01)  # a cushion exported in metres
+    ring.export(tmp_path / "metres.stl")
+    cases = [
+        (("--cushion", tmp_path / "none.stl"), "no such file"),
+        (("--cushion", tmp_path / "metres.stl"), "millimetres"),
+        (("--cushion", tmp_path / "metres.stl", "--generic"), "--mask"),
+        (("--cushion", tmp_path / "metres.stl", "--force", "-3"), "--force"),
+        (("--cushion", tmp_path / "metres.stl", "--cpap", "80"), "--cpap"),
+    ]
+    for args, word in cases:
+        assert_one_line_error(*cli("evaluate", phantom1_dir, *args, "--out", out), word)
+        assert not out.exists()

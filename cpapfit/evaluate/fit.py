@@ -6,8 +6,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 from scipy.ndimage import gaussian_filter1d
+from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
+from ..scan import Scan
+from ..template import load_template
 from .leak import leak_l_min
 from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, press
 from .rim import RimContact, find_rim
@@ -123,15 +126,32 @@ def recommended_force(rim: RimContact, k: np.ndarray, width_mm: float, params: F
     return float((contact + params.cpap_kpa * rim.sealed_area_mm2) * N_PER_KPA_MM2)
 
 
-def fit_cushion(
-    cushion: trimesh.Trimesh, scan_mesh: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray,
-    width_mm: float, force_n: float | None, params: FitParams = FitParams(),
-) -> CushionFit:
-    """A cushion mesh (mm, scan frame) pressed onto the scanned face along the unit mask `axis`
-    at `force_n` N (None: the recommended force for this rim); `face_mesh`: the registered
-    template (template vertex order), which finds the rim and tells the tissue under it."""
-    rim = find_rim(cushion, scan_mesh, face_mesh, axis, up)
-    k = stiffness(rim.points, np.asarray(face_mesh.vertices), params.tissue)
+@dataclass(frozen=True)
+class Face:
+    """What a cushion is pressed onto (mm, scan frame): the scan's surface (or point cloud), the
+    registered template (finds the rim, tells the tissue), the unit mask axis (out of the face)
+    and the head's up direction."""
+
+    scan: trimesh.Trimesh | trimesh.PointCloud
+    registered: trimesh.Trimesh
+    axis: np.ndarray
+    up: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+
+def face_of(scan: Scan, warped: np.ndarray, axis: np.ndarray, up: np.ndarray) -> Face:
+    """The `Face` of a scan and its registered template vertices `warped` (N, 3) mm."""
+    surface = trimesh.PointCloud(scan.vertices) if scan.is_point_cloud else trimesh.Trimesh(scan.vertices, scan.faces, process=False)
+    return Face(surface, trimesh.Trimesh(warped, load_template().faces, process=False), axis, up)
+
+
+def fit_cushion(cushion: trimesh.Trimesh, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams()) -> CushionFit:
+    """A cushion mesh (mm, scan frame) pressed onto a face along its mask axis at `force_n` N
+    (None: the recommended force for this rim); `width_mm` the seal flange width."""
+    rim = find_rim(cushion, face.scan, face.registered, face.axis, face.up)
+    k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
     pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)
     c = rim.covered
@@ -157,5 +177,19 @@ def compensating_preload(
     not bend tighter than its wall. `normals` (K, 3) skin normals; `warped` the registered template."""
     k = stiffness(curve, warped, params.tissue).effective
     need = params.target_kpa / (k * np.maximum(np.abs(normals @ axis), COS_MIN))  # axial indentation, mm
-    need = gaussian_filter1d(need, smoothing, mode="wrap")
-    return need - need.min()
+    return _lowest_zero(gaussian_filter1d(need, smoothing, mode="wrap"))
+
+
+def refined_preload(preload: np.ndarray, curve: np.ndarray, fit: CushionFit, smoothing: float, params: FitParams = FitParams()) -> np.ndarray:
+    """The pre-load (K,) mm along `curve` (K, 3) corrected by what pressing the cushion built with
+    it gave (`fit`): each point goes deeper by (target - pressure) / axial stiffness."""
+    c = fit.rim.covered
+    near = cKDTree(fit.rim.points[c]).query(curve)[1]
+    axial = fit.stiffness.effective[c][near] * np.maximum(fit.rim.cos[c][near], COS_MIN)
+    correction = (params.target_kpa - fit.pressure_kpa[c][near]) / axial
+    return _lowest_zero(preload + gaussian_filter1d(correction, smoothing, mode="wrap"))
+
+
+def _lowest_zero(preload: np.ndarray) -> np.ndarray:
+    """Pre-loads shifted so that the least is zero (the rest of the shift is the mask's travel)."""
+    return preload - preload.min()
