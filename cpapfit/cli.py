@@ -4,25 +4,29 @@ Errors the user can cause are printed as one line on stderr with exit code 2, ne
 """
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
-from .errors import CpapfitError, NotAvailableError
+from .errors import CpapfitError, InputError, NotAvailableError
 from .io import load_scan
-from .io.landmarks import landmarks_record, read_landmarks
-from .io.design import design_files, mask_dimensions, registration_ply
+from .io.landmarks import landmarks_record
+from .io.design import design_files, registration_ply
 from .io.phantom import write_phantom
+from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
+from .jobs import design_job, user_landmarks
 from .phantom import make_phantom
-from .progress import stage_display
-from .pipeline import NOT_BUILT_PARTS, Alignment, Design, align, design, missing_stages, register_template, stage_table
+from .progress import batch_display, stage_display
+from .pipeline import NOT_BUILT_PARTS, Alignment, align, design, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
 from .template import load_template
 
+EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
 EXIT_USER_ERROR = 2
 
 
@@ -78,13 +82,13 @@ def cmd_register(args) -> int:
     return 0
 
 
-def design_summary(d: Design) -> str:
-    """One line on a designed cushion."""
-    dims, rim = mask_dimensions(d), d.rim.summary()
-    generic = d.seated["generic"].summary()
+def design_summary(fit: dict) -> str:
+    """One line on a designed cushion, from its fit.json record."""
+    dims, rim = fit["cushion"], fit["fit_before_compression"]
+    generic = fit["seated_along_mask_axis"]["generic"]
     return (
-        f"{d.contact.mask} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
-        f"watertight, thinnest wall {d.checks['min_wall_mm']:.2f} mm, rim-to-skin gap median {rim['rim_gap_median_mm']:.2f} mm, "
+        f"{fit['mask']} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
+        f"watertight, thinnest wall {dims['min_wall_mm']:.2f} mm, rim-to-skin gap median {rim['rim_gap_median_mm']:.2f} mm, "
         f"max {rim['rim_gap_max_mm']:.2f} mm (generic cushion seated: median {generic['seated_gap_median_mm']:.1f} mm, "
         f"max {generic['seated_gap_max_mm']:.1f} mm)"
     )
@@ -92,14 +96,29 @@ def design_summary(d: Design) -> str:
 
 def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
-        on_stage("reading the scan")
-        scan = load_scan(Path(args.scan), args.units)
-        d = design(scan, args.mask, load_user_landmarks(args, scan), on_stage=on_stage)
-        on_stage("writing files")
-        written = write_files(Path(args.out), design_files(d, scan))
-    info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
+        run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage)
+    info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
     info(f"not built yet: {', '.join(NOT_BUILT_PARTS)}")
     return 0
+
+
+def cmd_batch(args) -> int:
+    from .batch import find_scans, run_batch  # here: Dask takes ~1 s to import, other commands need none of it
+
+    out = Path(args.out)
+    if args.workers is not None and (args.workers < 1 or args.scheduler):
+        raise InputError("--workers takes a number >= 1, for the local cluster only (with --scheduler the cluster's workers run)")
+    scans, others = find_scans(Path(args.input_dir), out)
+    if others:
+        info(f"not scans, left out: {', '.join(others)}")
+    with batch_display(len(scans), args.quiet) as advance:
+        rows = run_batch(scans, out, args.mask, args.workers, args.scheduler, lambda row: advance(f"{row.name}: {row.status}"))
+    write_files(out, {"summary.csv": summary_csv(rows), "batch_report.html": summary_html(rows, args.mask)})
+    for row in rows:
+        if row.status == "failed":
+            info(f"  {row.name}: {row.error}")
+    info(f"{counts(rows)}; outputs, summary.csv and batch_report.html in {out}")
+    return EXIT_SOME_FAILED if any(row.status == "failed" for row in rows) else 0
 
 
 def cmd_demo(args) -> int:
@@ -113,12 +132,13 @@ def cmd_demo(args) -> int:
     d = design(scan, "nasal")
     summaries.update(alignment_summaries(d.alignment))
     reg = d.registration
-    written = write_files(out / "design", design_files(d, scan))
+    files = design_files(d, scan)
+    written = write_files(out / "design", files)
     title = f"synthetic subject {args.seed}: registration residual"
     write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, d.alignment.similarity, title))
     summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
-    summaries["cushion"] = design_summary(d)
+    summaries["cushion"] = design_summary(json.loads(files["fit.json"]))
     summaries["export"] = f"{len(written)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
@@ -141,8 +161,7 @@ def cmd_inspect(args) -> int:
 
 def load_user_landmarks(args, scan: Scan):
     """The --landmarks file, in the scan's units, or None."""
-    path = getattr(args, "landmarks", None)
-    return read_landmarks(Path(path), scan.units, len(load_template().vertices)) if path else None
+    return user_landmarks(getattr(args, "landmarks", None), scan)
 
 
 def cmd_landmarks(args) -> int:
@@ -217,11 +236,18 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
         p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design}.get(name, not_available(name)))
 
-    p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
-    p.add_argument("input_dir")
-    p.add_argument("--out", required=True)
-    p.add_argument("--scheduler", help="address of an existing Dask scheduler")
-    p.set_defaults(func=not_available("batch"))
+    p = sub.add_parser(
+        "batch", help="design every scan in a folder, in parallel (Dask)",
+        epilog="exit code: 0 every scan designed or unchanged, 1 some scans failed (rows of the summary), "
+               "2 bad arguments or INPUT_DIR (nothing run)",
+    )
+    p.add_argument("input_dir", help="folder of scans: mesh files and RGB-D capture folders")
+    p.add_argument("--out", required=True, help="output folder: one folder per scan, summary.csv, batch_report.html")
+    p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
+    p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=cmd_batch)
     return ap
 
 
