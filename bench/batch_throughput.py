@@ -9,6 +9,7 @@ import argparse
 import csv
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -20,19 +21,31 @@ from cpapfit.io.phantom import write_phantom
 from cpapfit.phantom import make_phantom
 
 
-def batch(scans: Path, out: Path, *options: str) -> float:
-    """Seconds for one `cpapfit batch` run (process start to exit)."""
-    t0 = time.perf_counter()
+def children_cpu() -> float:
+    """CPU seconds (user + system) of the finished child processes and their own reaped children."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def batch(scans: Path, out: Path, *options: str) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of the batch process and its local workers) for one
+    `cpapfit batch` run, process start to exit."""
+    t0, cpu0 = time.perf_counter(), children_cpu()
     subprocess.run([sys.executable, "-m", "cpapfit", "batch", str(scans), "--out", str(out), "--quiet", *options], check=True)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, children_cpu() - cpu0
 
 
-def report(label: str, n: int, seconds: float, out: Path) -> None:
+def report(label: str, n: int, seconds: tuple[float, float], out: Path) -> None:
+    """One line: throughput, time per scan, CPU per scan (the machine's other load shows in the gap)."""
     with open(out / "summary.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert all(r["status"] == "designed" for r in rows), rows
     per_scan = statistics.median(float(r["time (s)"]) for r in rows)
-    print(f"{label}: {n} scans in {seconds:.1f} s = {60 * n / seconds:.1f} scans/min (median {per_scan:.1f} s per scan on its worker)")
+    wall, cpu = seconds
+    print(
+        f"{label}: {n} scans in {wall:.1f} s = {60 * n / wall:.1f} scans/min (median {per_scan:.1f} s per scan on its "
+        f"worker; {cpu / n:.1f} CPU s per scan in local processes)"
+    )
 
 
 def main() -> None:
@@ -47,6 +60,7 @@ def main() -> None:
         for seed in range(args.scans):
             write_phantom(make_phantom(seed), scans / f"seed{seed}")
         for w in args.workers:
+            print(f"load average (1 min) before: {os.getloadavg()[0]:.1f}")
             out = Path(tmp) / f"out-{w}"
             report(f"local cluster, {w} worker process(es)", args.scans, batch(scans, out, "--workers", str(w)), out)
         if args.scheduler:

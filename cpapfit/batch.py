@@ -54,7 +54,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     if not scheduler:
         cluster = LocalCluster(
             n_workers=workers or os.cpu_count(), threads_per_worker=1, processes=True,
-            dashboard_address=None, silence_logs=logging.ERROR,
+            dashboard_address=None, silence_logs=logging.CRITICAL,  # failures are rows of the summary
         )
         with cluster, Client(cluster) as client:
             yield client

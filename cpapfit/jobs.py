@@ -106,7 +106,7 @@ def content_hash(task: ScanTask) -> str:
     h = hashlib.sha256(json_bytes({"cpapfit": __version__, "mask": task.mask, "units": task.units}))
     for path in scan_inputs(task.scan):
         data = path.read_bytes()
-        h.update(f"{path.relative_to(task.scan.parent)}\0{len(data)}\0".encode())
+        h.update(f"{os.path.relpath(path, task.scan.parent)}\0{len(data)}\0".encode())
         h.update(data)
     return h.hexdigest()
 
@@ -184,12 +184,10 @@ def _replace_folder(new: Path, folder: Path) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-def clean_leftovers(out_dir: Path) -> list[str]:
-    """Remove the hidden staging folders and files a killed run left in `out_dir`; their names."""
-    found = [p for p in Path(out_dir).iterdir() if LEFTOVER.match(p.name)] if Path(out_dir).is_dir() else []
-    for path in found:
+def clean_leftovers(out_dir: Path) -> None:
+    """Remove the hidden staging folders and files a killed run left in `out_dir`."""
+    for path in [p for p in Path(out_dir).glob(".*") if LEFTOVER.match(p.name)]:
         if path.is_dir():
             shutil.rmtree(path)
         else:
             path.unlink()
-    return sorted(p.name for p in found)
