@@ -4,27 +4,31 @@ Errors the user can cause are printed as one line on stderr with exit code 2, ne
 """
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
-from .errors import CpapfitError, NotAvailableError
+from .errors import CpapfitError, InputError
 from .evaluate.fit import FitParams
 from .io import load_scan
-from .io.landmarks import landmarks_record, read_landmarks
 from .io.cushion import load_cushion
-from .io.design import design_files, evaluation_record, mask_dimensions, registration_ply
+from .io.landmarks import landmarks_record
+from .io.design import design_files, evaluation_record, registration_ply
 from .io.phantom import write_phantom
+from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
+from .jobs import design_job, user_landmarks
 from .phantom import make_phantom
-from .progress import stage_display
-from .pipeline import Alignment, Design, align, design, evaluate, face_for, missing_stages, register_template, stage_table
+from .progress import batch_display, stage_display
+from .pipeline import Alignment, align, design, evaluate, face_for, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
 from .template import load_template
 
+EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
 EXIT_USER_ERROR = 2
 
 
@@ -80,25 +84,27 @@ def cmd_register(args) -> int:
     return 0
 
 
-def design_summary(d: Design) -> str:
-    """One line on a designed cushion."""
-    dims, rim = mask_dimensions(d), d.rim.summary()
+def design_summary(fit: dict) -> str:
+    """One line on a designed cushion, from its fit.json record."""
+    dims, rim = fit["cushion"], fit["fit_before_compression"]
     return (
-        f"{d.contact.mask} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
-        f"watertight, thinnest wall {d.checks['min_wall_mm']:.2f} mm, rim-to-skin gap before pre-load median "
+        f"{fit['mask']} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
+        f"watertight, thinnest wall {dims['min_wall_mm']:.2f} mm, rim-to-skin gap before pre-load median "
         f"{rim['rim_gap_median_mm']:.2f} mm, max {rim['rim_gap_max_mm']:.2f} mm"
     )
 
 
-def fit_summary(fits: dict, cpap_cmh2o: float) -> str:
-    """One line per cushion: pressure, window, leak at the headgear force."""
+def fit_summary(fit: dict) -> str:
+    """One line per cushion of a fit.json record: pressure, window, leak at its headgear force."""
     lines = []
-    for name, fit in fits.items():
-        s = fit.summary()
+    for name in ("custom", "generic"):
+        if name not in fit:
+            continue
+        s = fit[name]
         cv = "n/a" if s["pressure_cv"] is None else f"{s['pressure_cv']:.2f}"
         seal = "does not seal" if s["seal_force_n"] is None else f"seals from {s['seal_force_n']:.1f} N"
         lines.append(
-            f"{name} at {fit.force_n:.1f} N, {cpap_cmh2o:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
+            f"{name} at {fit['headgear_force_n']:.1f} N, {fit['cpap_cmh2o']:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
             f"CV {cv}, max {s['pressure_max_kpa']:.2f} kPa ({s['pressure_max_mmhg']:.0f} mmHg, {s['pressure_max_region']}), "
             f"{100 * s['window_fraction']:.0f} % in the safe window, leak {s['leak_l_min']:.2f} L/min, {seal}"
         )
@@ -107,13 +113,9 @@ def fit_summary(fits: dict, cpap_cmh2o: float) -> str:
 
 def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
-        on_stage("reading the scan")
-        scan = load_scan(Path(args.scan), args.units)
-        d = design(scan, args.mask, load_user_landmarks(args, scan), on_stage=on_stage)
-        on_stage("writing files")
-        written = write_files(Path(args.out), design_files(d, scan))
-    info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
-    info(fit_summary(d.fits, d.fit_params.cpap_cmh2o))
+        run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage)
+    info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
+    info(fit_summary(run.fit))
     return 0
 
 
@@ -133,8 +135,27 @@ def cmd_evaluate(args) -> int:
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
     write_bytes(Path(args.out), json_bytes(record))
-    info(f"{scan.units_note}; {fit_summary(fits, params.cpap_cmh2o)} -> {args.out}")
+    info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")
     return 0
+
+
+def cmd_batch(args) -> int:
+    from .batch import find_scans, run_batch  # here: Dask takes ~1 s to import, other commands need none of it
+
+    out = Path(args.out)
+    if args.workers is not None and (args.workers < 1 or args.scheduler):
+        raise InputError("--workers takes a number >= 1, for the local cluster only (with --scheduler the cluster's workers run)")
+    scans, others = find_scans(Path(args.input_dir), out)
+    if others:
+        info(f"not scans, left out: {', '.join(others)}")
+    with batch_display(len(scans), args.quiet) as advance:
+        rows = run_batch(scans, out, args.mask, args.workers, args.scheduler, lambda row: advance(f"{row.name}: {row.status}"))
+    write_files(out, {"summary.csv": summary_csv(rows), "batch_report.html": summary_html(rows, args.mask)})
+    for row in rows:
+        if row.status == "failed":
+            info(f"  {row.name}: {row.error}")
+    info(f"{counts(rows)}; outputs, summary.csv and batch_report.html in {out}")
+    return EXIT_SOME_FAILED if any(row.status == "failed" for row in rows) else 0
 
 
 def cmd_demo(args) -> int:
@@ -148,13 +169,15 @@ def cmd_demo(args) -> int:
     d = design(scan, "nasal")
     summaries.update(alignment_summaries(d.alignment))
     reg = d.registration
-    written = write_files(out / "design", design_files(d, scan))
+    files = design_files(d, scan)
+    written = write_files(out / "design", files)
     title = f"synthetic subject {args.seed}: registration residual"
     write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, d.alignment.similarity, title))
     summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
-    summaries["cushion"] = design_summary(d)
-    summaries["evaluate"] = fit_summary(d.fits, d.fit_params.cpap_cmh2o)
+    fit = json.loads(files["fit.json"])
+    summaries["cushion"] = design_summary(fit)
+    summaries["evaluate"] = fit_summary(fit)
     summaries["export"] = f"{len(written)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
@@ -177,8 +200,7 @@ def cmd_inspect(args) -> int:
 
 def load_user_landmarks(args, scan: Scan):
     """The --landmarks file, in the scan's units, or None."""
-    path = getattr(args, "landmarks", None)
-    return read_landmarks(Path(path), scan.units, len(load_template().vertices)) if path else None
+    return user_landmarks(getattr(args, "landmarks", None), scan)
 
 
 def cmd_landmarks(args) -> int:
@@ -195,19 +217,6 @@ def cmd_landmarks(args) -> int:
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {len(al.landmarks.points)} landmarks by {al.landmarks.path} -> {args.out}")
     return 0
-
-
-def not_available(command: str):
-    """A command handler for a stage not built yet: reads the scan, then says so plainly."""
-
-    def handler(args) -> int:
-        if getattr(args, "scan", None):
-            load_scan(Path(args.scan), getattr(args, "units", "auto"))  # bad input is still reported as such
-        raise NotAvailableError(
-            f"cpapfit {command}: not available yet (stages not built: {', '.join(missing_stages())}); no output written"
-        )
-
-    return handler
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -256,11 +265,18 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--cpap", type=float, default=10.0, help="CPAP pressure in cmH2O (default 10)")
         p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design, "evaluate": cmd_evaluate}[name])
 
-    p = sub.add_parser("batch", help="run design on every scan in a folder (Dask)")
-    p.add_argument("input_dir")
-    p.add_argument("--out", required=True)
-    p.add_argument("--scheduler", help="address of an existing Dask scheduler")
-    p.set_defaults(func=not_available("batch"))
+    p = sub.add_parser(
+        "batch", help="design every scan in a folder, in parallel (Dask)",
+        epilog="exit code: 0 every scan designed or unchanged, 1 some scans failed (rows of the summary), "
+               "2 bad arguments or INPUT_DIR (nothing run)",
+    )
+    p.add_argument("input_dir", help="folder of scans: mesh files and RGB-D capture folders")
+    p.add_argument("--out", required=True, help="output folder: one folder per scan, summary.csv, batch_report.html")
+    p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
+    p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=cmd_batch)
     return ap
 
 

@@ -15,6 +15,3 @@ class InputError(CpapfitError):
 class UnitsError(CpapfitError):
     """The scan's size fits no supported unit, or the stated unit is implausible."""
 
-
-class NotAvailableError(CpapfitError):
-    """A command whose stage is not built yet."""

@@ -1,12 +1,13 @@
-"""Progress on a terminal: the running stage with a spinner (rich), on stderr.
-
-Quiet when stderr is not a terminal or with --quiet; --verbose adds each stage's time.
+"""Progress on a terminal, on stderr (rich): the running stage of a design with a spinner, or a
+bar across a batch. Quiet when stderr is not a terminal or with --quiet; --verbose adds each
+stage's time.
 """
 
 import contextlib
 import time
 
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 
 @contextlib.contextmanager
@@ -30,3 +31,16 @@ def stage_display(quiet: bool = False, verbose: bool = False):
 
         yield on_stage
         finish()
+
+
+@contextlib.contextmanager
+def batch_display(total: int, quiet: bool = False):
+    """Yield an `advance(text)` callback: one scan of `total` done, `text` says which and how."""
+    console = Console(stderr=True)
+    if quiet or not console.is_terminal:
+        yield lambda text: None
+        return
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=console) as progress:
+        task = progress.add_task("designing scans", total=total)
+        yield lambda text: progress.update(task, advance=1, description=text)

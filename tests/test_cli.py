@@ -109,12 +109,6 @@ def test_missing_intrinsics_and_truncated_depth(cli, capture):
     assert_one_line_error(*cli("inspect", capture), "intrinsics.json")
 
 
-def test_commands_not_built_yet_say_so_and_write_nothing(cli, tmp_path, phantom1_dir):
-    out = tmp_path / "batch"
-    assert_one_line_error(*cli("batch", phantom1_dir.parent, "--out", out), "not available yet", "batch")
-    assert not out.exists()
-
-
 def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, monkeypatch):
     """Demand walls thicker than the design can give: the check refuses, and no file is written."""
     import cpapfit.pipeline as pipeline

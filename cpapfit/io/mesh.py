@@ -59,6 +59,24 @@ def read_geometry(path: Path):
     return loaded
 
 
+def companion_files(path: Path) -> list[Path]:
+    """The files an OBJ is read with besides itself: its material libraries and their texture maps
+    (those that exist); none for other formats."""
+    path = Path(path)
+    if path.suffix.lower() != ".obj":
+        return []
+    libraries = _named_files(path, ("mtllib",))
+    return libraries + [t for lib in libraries for t in _named_files(lib, ("map_", "bump", "disp", "norm"))]
+
+
+def _named_files(path: Path, keywords: tuple[str, ...]) -> list[Path]:
+    """Existing files named (last word, relative to the folder) by the lines of a text file that
+    start with one of `keywords`."""
+    with open(path, encoding="latin-1") as fh:
+        names = [line.split()[-1] for line in fh if line.startswith(keywords) and len(line.split()) > 1]
+    return [path.parent / n for n in dict.fromkeys(names) if (path.parent / n).is_file()]
+
+
 # OBJ statements and the fewest fields each needs; an OBJ (no counts in a header) cut short
 # usually ends in the middle of one.
 OBJ_FIELDS = {"v": 3, "vt": 2, "vn": 3, "f": 3, "l": 2}

@@ -1,0 +1,193 @@
+"""Units of work at the edge, from files to files: one `design` run, and the idempotent batch job
+around it (content hash, hidden staging folder renamed into place, manifest written last).
+
+A batch job's outputs go to OUT_DIR/<name>/, which holds either the complete outputs of the scan
+as it is now, with `manifest.json`, or nothing: they are built in a hidden `.<name>.tmp-*` folder
+beside it and renamed into place; a run killed midway leaves only hidden folders, which
+`clean_leftovers` removes.
+"""
+
+import hashlib
+import json
+import os
+import re
+import shutil
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from . import __version__
+from .errors import CpapfitError, InputError
+from .io import load_scan
+from .io.design import design_files
+from .io.landmarks import read_landmarks
+from .io.mesh import companion_files
+from .io.write import json_bytes, write_bytes, write_files
+from .landmarks.types import Landmarks
+from .pipeline import design
+from .scan import Scan
+from .template import load_template
+
+MANIFEST = "manifest.json"
+LEFTOVER = re.compile(r"^\..+\.(tmp|old)-\w+$")  # hidden staging names in OUT_DIR
+
+
+def _silent(stage: str) -> None:
+    """The default stage callback: nothing."""
+
+
+def user_landmarks(path: str | Path | None, scan: Scan) -> Landmarks | None:
+    """A user landmarks file (in the scan's units) read as `Landmarks` in mm, or None without one."""
+    return read_landmarks(Path(path), scan.units, len(load_template().vertices)) if path else None
+
+
+@dataclass(frozen=True)
+class DesignRun:
+    """What one design run wrote: `fit` (the contents of fit.json), how the scan's unit was decided,
+    and the names of the files written."""
+
+    fit: dict
+    units_note: str
+    files: tuple[str, ...]
+
+
+def design_job(
+    scan_path: str | Path, out_dir: str | Path, mask: str = "nasal", landmarks_path: str | Path | None = None,
+    units: str = "auto", on_stage: Callable[[str], None] = _silent,
+) -> DesignRun:
+    """`cpapfit design`: read the scan (and landmarks), design, write every file atomically to `out_dir`."""
+    on_stage("reading the scan")
+    scan = load_scan(Path(scan_path), units)
+    d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage)
+    on_stage("writing files")
+    files = design_files(d, scan)
+    write_files(Path(out_dir), files)
+    return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files))
+
+
+@dataclass(frozen=True)
+class ScanTask:
+    """One scan of a batch: the scan (mesh file or capture folder), its output folder
+    OUT_DIR/<name>, and the design parameters."""
+
+    scan: Path
+    out: Path
+    mask: str = "nasal"
+    units: str = "auto"
+
+
+@dataclass(frozen=True)
+class ScanResult:
+    """One row of a batch summary. status: "designed", "unchanged" (outputs kept from an earlier
+    run) or "failed" (with `error`). seconds: time spent on the scan in this run (None when its
+    worker was lost). leak (L/min),
+    window fraction (0-1) and warnings come from fit.json; None or empty where fit.json has none."""
+
+    name: str
+    status: str
+    seconds: float | None
+    leak_l_min: float | None = None
+    window_fraction: float | None = None
+    warnings: tuple[str, ...] = ()
+    error: str = ""
+
+
+def scan_inputs(scan: Path) -> list[Path]:
+    """Every file a scan is read from: a capture folder's files, or a mesh file and its companions."""
+    if scan.is_dir():
+        return sorted(p for p in scan.rglob("*") if p.is_file())
+    return [scan, *companion_files(scan)]
+
+
+def content_hash(task: ScanTask) -> str:
+    """SHA-256 of the cpapfit version, the parameters and every input file (name, size, bytes)."""
+    h = hashlib.sha256(json_bytes({"cpapfit": __version__, "mask": task.mask, "units": task.units}))
+    for path in scan_inputs(task.scan):
+        data = path.read_bytes()
+        h.update(f"{os.path.relpath(path, task.scan.parent)}\0{len(data)}\0".encode())
+        h.update(data)
+    return h.hexdigest()
+
+
+def run_scan(task: ScanTask) -> ScanResult:
+    """The batch task: skip a scan whose outputs match its content hash, else design it into a
+    staging folder renamed into place. Never raises: a failure is a row with its error message,
+    and leaves no outputs for the scan (stale ones from an earlier input are removed)."""
+    start = time.perf_counter()
+    try:
+        digest = content_hash(task)
+        kept = _kept_fit(task.out, digest)
+        fit = kept if kept is not None else _build(task, digest, start)
+        return _result(task.out.name, "unchanged" if kept is not None else "designed", fit, time.perf_counter() - start)
+    except Exception as exc:  # one scan's failure, whatever it is, is its row and never the batch's end
+        if _owned(task.out):
+            shutil.rmtree(task.out)
+        message = str(exc) if isinstance(exc, CpapfitError) else f"internal error {type(exc).__name__}: {exc}"
+        return ScanResult(task.out.name, "failed", time.perf_counter() - start, error=message)
+
+
+def _result(name: str, status: str, fit: dict, seconds: float) -> ScanResult:
+    """A summary row from fit.json's leak, window fraction and warnings, where present."""
+    custom = fit.get("custom", {})
+    warnings = [str(w) for w in fit.get("warnings", [])] + (["rescan advised"] if fit.get("rescan_advised") else [])
+    return ScanResult(name, status, seconds, custom.get("leak_l_min"), custom.get("window_fraction"), tuple(warnings))
+
+
+def _owned(folder: Path) -> bool:
+    """True when `folder` was made by a batch job (it has a manifest)."""
+    return (folder / MANIFEST).is_file()
+
+
+def _kept_fit(folder: Path, digest: str) -> dict | None:
+    """fit.json of earlier outputs made from the same content hash and still complete, or None."""
+    try:
+        manifest = json.loads((folder / MANIFEST).read_text())
+        complete = manifest["hash"] == digest and all((folder / name).is_file() for name in manifest["files"])
+        return json.loads((folder / "fit.json").read_text()) if complete else None
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _build(task: ScanTask, digest: str, start: float) -> dict:
+    """Design into a hidden staging folder, write the manifest last, rename into place; the fit."""
+    if task.out.exists() and not _owned(task.out):
+        raise InputError(f"{task.out}: exists and was not made by cpapfit batch; move it away or choose another --out")
+    staging = _hidden(task.out, "tmp")
+    staging.mkdir(parents=True)
+    try:
+        run = design_job(task.scan, staging, task.mask, units=task.units)
+        manifest = {
+            "hash": digest, "cpapfit_version": __version__, "scan": str(task.scan),
+            "parameters": {"mask": task.mask, "units": task.units}, "files": list(run.files),
+            "seconds": round(time.perf_counter() - start, 2),
+        }
+        write_bytes(staging / MANIFEST, json_bytes(manifest))
+        _replace_folder(staging, task.out)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return run.fit
+
+
+def _hidden(folder: Path, kind: str) -> Path:
+    """A fresh hidden sibling of `folder` for staging ("tmp") or for the outputs it replaces ("old")."""
+    return folder.with_name(f".{folder.name}.{kind}-{uuid.uuid4().hex[:8]}")
+
+
+def _replace_folder(new: Path, folder: Path) -> None:
+    """Put `new` in place of `folder` by renames; a kill in between leaves only hidden folders."""
+    old = _hidden(folder, "old")
+    if folder.exists():
+        os.rename(folder, old)
+    os.rename(new, folder)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def clean_leftovers(out_dir: Path) -> None:
+    """Remove the hidden staging folders and files a killed run left in `out_dir`."""
+    for path in [p for p in Path(out_dir).glob(".*") if LEFTOVER.match(p.name)]:
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink()

@@ -1,0 +1,170 @@
+"""cpapfit batch: scans designed on a Dask cluster of worker processes, a failed scan is a row,
+a rerun skips what is unchanged and retries failures, a killed run leaves nothing half-written."""
+
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import trimesh
+from distributed import LocalCluster
+
+from cpapfit.batch import find_scans
+from cpapfit.io.phantom import write_phantom
+from cpapfit.io.summary import summary_csv, summary_html
+from cpapfit.jobs import ScanTask, content_hash, run_scan
+from cpapfit.phantom import make_phantom
+from test_cli import assert_one_line_error
+
+
+@pytest.fixture(scope="module")
+def phantoms(tmp_path_factory, phantom1_dir):
+    """Two synthetic capture folders, p1 and p2."""
+    folder = tmp_path_factory.mktemp("phantoms")
+    shutil.copytree(phantom1_dir, folder / "p1")
+    write_phantom(make_phantom(2), folder / "p2")
+    return folder
+
+
+def scans_folder(phantoms, folder):
+    """A batch input: copies of p1 and p2."""
+    shutil.copytree(phantoms, folder)
+    return folder
+
+
+def summary(out):
+    with open(out / "summary.csv", newline="") as fh:
+        return {row["scan"]: row for row in csv.DictReader(fh)}
+
+
+def stamps(out, names):
+    """(inode, mtime in ns) of each scan's manifest."""
+    return {n: ((st := os.stat(out / n / "manifest.json")).st_ino, st.st_mtime_ns) for n in names}
+
+
+def finished(out):
+    """The scans whose outputs are in place (a visible folder with a manifest)."""
+    return [p.parent.name for p in out.glob("*/manifest.json") if not p.parent.name.startswith(".")]
+
+
+def hidden(out):
+    return sorted(p.name for p in out.iterdir() if p.name.startswith("."))
+
+
+def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_scheduler(cli, phantoms, tmp_path):
+    inp, out = scans_folder(phantoms, tmp_path / "in"), tmp_path / "out"
+    (inp / "bad.ply").write_bytes(b"ply\nthis is no mesh\n")
+    (inp / "notes.txt").write_text("not a scan")
+
+    code, _, err = cli("batch", inp, "--out", out, "--workers", 2)
+    assert code == 1, err  # some failed
+    rows = summary(out)
+    assert sorted(rows) == ["bad", "p1", "p2"]  # notes.txt is no scan
+    assert rows["bad"]["status"] == "failed" and "bad.ply" in rows["bad"]["error"] and "not a readable PLY" in rows["bad"]["error"]
+    assert "bad.ply" in err and "3 scans: 2 designed, 0 unchanged, 1 failed" in err and "Traceback" not in err
+    for name in ("p1", "p2"):
+        assert rows[name]["status"] == "designed" and rows[name]["error"] == "" and float(rows[name]["time (s)"]) > 1
+        manifest = json.loads((out / name / "manifest.json").read_text())
+        assert manifest["hash"] == content_hash(ScanTask(inp / name, out / name, "nasal"))
+        assert all((out / name / f).stat().st_size > 0 for f in manifest["files"])
+        assert json.loads((out / name / "fit.json").read_text())["mask"] == "nasal"
+        assert trimesh.load(out / name / "cushion.stl").is_watertight
+    assert not (out / "bad").exists() and hidden(out) == []
+    page = (out / "batch_report.html").read_text()
+    assert "<th>time (s)</th>" in page and "<th>leak (L/min)</th>" in page and page.count("<tr class=") == 3
+    assert "http" not in page and "<script" not in page  # self-contained, offline
+
+    before = stamps(out, ["p1", "p2"])
+    (inp / "bad.ply").write_bytes(b"")  # still bad, differently: a retry gives the new error
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address)
+    assert code == 1, err
+    rows = summary(out)
+    assert [rows[n]["status"] for n in ("bad", "p1", "p2")] == ["failed", "unchanged", "unchanged"]
+    assert "the file is empty" in rows["bad"]["error"]
+    assert stamps(out, ["p1", "p2"]) == before  # not redone
+
+
+def test_rerun_after_a_kill_redoes_only_what_was_unfinished(cli, phantoms, tmp_path):
+    inp, out, log = scans_folder(phantoms, tmp_path / "in"), tmp_path / "out", tmp_path / "stderr.txt"
+    command = [sys.executable, "-m", "cpapfit", "batch", str(inp), "--out", str(out), "--workers", "1", "--quiet"]
+    with open(log, "w") as stderr:
+        proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr)
+    try:
+        deadline = time.monotonic() + 240
+        while not (finished(out) and hidden(out)):  # one scan done, the next one under way
+            assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
+            time.sleep(0.05)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the batch and its worker processes
+        proc.wait()
+    (done,) = finished(out)
+    (unfinished,) = {"p1", "p2"} - {done}
+    assert not (out / unfinished).exists() and hidden(out)  # only hidden staging is left of it
+    before = stamps(out, [done])
+
+    code, _, err = cli("batch", inp, "--out", out, "--workers", 1)
+    assert code == 0, err
+    rows = summary(out)
+    assert rows[done]["status"] == "unchanged" and rows[unfinished]["status"] == "designed"
+    assert stamps(out, [done]) == before
+    assert hidden(out) == [] and (out / unfinished / "manifest.json").is_file()
+
+
+def test_content_hash_follows_bytes_parameters_and_an_obj_texture(tmp_path):
+    scan = tmp_path / "face.obj"
+    scan.write_text("mtllib face.mtl\nv 0 0 0\n")
+    (tmp_path / "face.mtl").write_text("newmtl skin\nmap_Kd skin.png\n")
+    (tmp_path / "skin.png").write_bytes(b"one")
+    task = ScanTask(scan, tmp_path / "out" / "face")
+    first = content_hash(task)
+    assert content_hash(task) == first
+    assert content_hash(ScanTask(scan, tmp_path / "out" / "face", mask="oronasal")) != first
+    (tmp_path / "skin.png").write_bytes(b"two")
+    assert content_hash(task) != first
+
+
+def test_kept_outputs_give_their_fit_numbers_and_changed_input_that_fails_removes_them(tmp_path):
+    scan = tmp_path / "face.ply"
+    scan.write_text("ply\nnot really\n")
+    task = ScanTask(scan, tmp_path / "out" / "face")
+    task.out.mkdir(parents=True)
+    fit = {"custom": {"leak_l_min": 1.234, "window_fraction": 0.875}, "warnings": ["thin bridge"], "rescan_advised": True}
+    (task.out / "fit.json").write_text(json.dumps(fit))
+    (task.out / "manifest.json").write_text(json.dumps({"hash": content_hash(task), "files": ["fit.json"]}))
+    row = run_scan(task)
+    assert (row.status, row.leak_l_min, row.window_fraction, row.warnings) == ("unchanged", 1.234, 0.875, ("thin bridge", "rescan advised"))
+    assert "face,unchanged,0.0,1.23,0.875,thin bridge; rescan advised," in summary_csv([row]).decode()
+    assert "<td>1.23</td><td>0.875</td>" in summary_html([row], "nasal").decode()
+
+    scan.write_text("ply\nchanged, still not a mesh\n")
+    row = run_scan(task)
+    assert row.status == "failed" and "face.ply" in row.error and row.leak_l_min is None
+    assert ",failed," in summary_csv([row]).decode() and not task.out.exists()
+
+
+def test_scans_found_and_named(tmp_path):
+    inp = tmp_path / "in"
+    for name in ("a.ply", "a.obj", "b.STL", "readme.txt", ".hidden.ply"):
+        (inp / name).parent.mkdir(exist_ok=True)
+        (inp / name).write_text("x")
+    (inp / "capture").mkdir()
+    (inp / "results").mkdir()
+    scans, others = find_scans(inp, inp / "results")
+    assert {n: p.name for n, p in scans.items()} == {"a.obj": "a.obj", "a.ply": "a.ply", "b": "b.STL", "capture": "capture"}
+    assert others == ["readme.txt"]
+
+
+def test_batch_user_errors(cli, tmp_path):
+    assert_one_line_error(*cli("batch", tmp_path / "nope", "--out", tmp_path / "out"), "no such folder")
+    (tmp_path / "empty").mkdir()
+    assert_one_line_error(*cli("batch", tmp_path / "empty", "--out", tmp_path / "out"), "no scans")
+    (tmp_path / "empty" / "a.ply").write_text("x")
+    assert_one_line_error(*cli("batch", tmp_path / "empty", "--out", tmp_path / "empty"), "output folder")
+    assert_one_line_error(*cli("batch", tmp_path / "empty", "--out", tmp_path / "out", "--workers", 0), "--workers")
+    assert not (tmp_path / "out").exists()
