@@ -4,6 +4,7 @@ Errors the user can cause are printed as one line on stderr with exit code 2, ne
 """
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -14,12 +15,13 @@ from .errors import CpapfitError, NotAvailableError
 from .io import load_scan
 from .io.landmarks import landmarks_record, read_landmarks
 from .io.design import design_files, mask_dimensions, registration_ply
+from .io.report import report_files
 from .io.phantom import write_phantom
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .phantom import make_phantom
 from .progress import stage_display
 from .pipeline import NOT_BUILT_PARTS, Alignment, Design, align, design, missing_stages, register_template, stage_table
-from .report.pictures import residual_picture, template_regions_picture
+from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
 
@@ -90,14 +92,31 @@ def design_summary(d: Design) -> str:
     )
 
 
+def design_and_report(scan: Scan, mask: str, user_landmarks, out: Path, on_stage) -> tuple[Design, dict, list[Path]]:
+    """Design the cushion, build its report, write every file under `out`: (design, fit record, paths written)."""
+    d = design(scan, mask, user_landmarks, on_stage=on_stage)
+    files = design_files(d, scan)
+    on_stage("report")
+    files |= report_files(d, scan, files)
+    on_stage("writing files")
+    return d, json.loads(files["fit.json"]), write_files(out, files)
+
+
+def report_summary(out: Path, fit: dict) -> str:
+    """Where the report is and its headline numbers (custom vs generic)."""
+    seated = fit["seated_along_mask_axis"]
+    gaps = "; ".join(f"{n}: median {seated[n]['seated_gap_median_mm']:.2f} mm, max {seated[n]['seated_gap_max_mm']:.2f} mm"
+                     for n in ("custom", "generic"))
+    return f"report: {out / 'report.html'} (open it in a browser)\n  rim-to-skin gap, cushion seated rigidly: {gaps}"
+
+
 def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
         on_stage("reading the scan")
         scan = load_scan(Path(args.scan), args.units)
-        d = design(scan, args.mask, load_user_landmarks(args, scan), on_stage=on_stage)
-        on_stage("writing files")
-        written = write_files(Path(args.out), design_files(d, scan))
+        d, fit, written = design_and_report(scan, args.mask, load_user_landmarks(args, scan), Path(args.out), on_stage)
     info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
+    info(report_summary(Path(args.out), fit))
     info(f"not built yet: {', '.join(NOT_BUILT_PARTS)}")
     return 0
 
@@ -106,23 +125,23 @@ def cmd_demo(args) -> int:
     out = Path(args.out)
     subject = out / "subject"
     info(f"cpapfit demo: synthetic subject (seed {args.seed}) -> {subject}")
-    write_phantom(make_phantom(args.seed), subject)
-    scan = load_scan(subject)
-    write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
+    with stage_display(args.quiet, args.verbose) as on_stage:
+        on_stage("synthetic subject")
+        write_phantom(make_phantom(args.seed), subject)
+        scan = load_scan(subject)
+        write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
+        d, fit, written = design_and_report(scan, "nasal", None, out / "design", on_stage)
     summaries = {"scan": scan_summary(scan), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
-    d = design(scan, "nasal")
     summaries.update(alignment_summaries(d.alignment))
-    reg = d.registration
-    written = write_files(out / "design", design_files(d, scan))
-    title = f"synthetic subject {args.seed}: registration residual"
-    write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, d.alignment.similarity, title))
-    summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
+    summaries["nonrigid"] = registration_summary(d.registration)
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
     summaries["cushion"] = design_summary(d)
     summaries["export"] = f"{len(written)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
+    summaries["report"] = f"report.html and {sum(p.suffix == '.png' for p in written)} pictures in {out / 'design'}"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
     print(f"stages not built yet: {', '.join(missing_stages())}; parts not built yet: {', '.join(NOT_BUILT_PARTS)}.")
+    print(report_summary(out / "design", fit))
     return 0
 
 
@@ -174,6 +193,11 @@ def not_available(command: str):
     return handler
 
 
+def add_progress_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--verbose", action="store_true", help="print each stage's time")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cpapfit", description="A personalised CPAP mask cushion from a facial depth scan.")
     ap.add_argument("--version", action="version", version=f"cpapfit {__version__}")
@@ -182,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="run every built stage on a synthetic subject (no input needed)")
     p.add_argument("--out", default="cpapfit-demo", help="output folder (default: ./cpapfit-demo)")
     p.add_argument("--seed", type=int, default=0, help="synthetic subject seed (default 0)")
+    add_progress_options(p)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("phantom", help="write a synthetic RGB-D subject with ground truth")
@@ -210,8 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
-            p.add_argument("--quiet", action="store_true", help="no progress display")
-            p.add_argument("--verbose", action="store_true", help="print each stage's time")
+            add_progress_options(p)
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion")
