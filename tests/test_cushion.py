@@ -73,7 +73,9 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
     names = {p.name for p in out.iterdir()}
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
-                     "mould_left.stl", "mould_right.stl", "mould_core.stl"}
+                     "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
+                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png"}
+    assert f"report: {out / 'report.html'}" in err
     curve = json.loads((out / "contact_curve.json").read_text())
     pts = np.array(curve["points"])
     assert curve["units"] == "mm" and pts.shape[1] == 3
