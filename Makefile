@@ -1,7 +1,8 @@
 # Two commands do everything on a fresh machine:
 #   make demo   installs into .venv and runs `cpapfit demo`
-#   make test   installs into .venv and runs the test suite
+#   make test   installs into .venv (and Debian's chromium, for the report's browser test) and runs the test suite
 PYTHON ?= python3
+CHROMIUM := /usr/bin/chromium
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
@@ -19,8 +20,13 @@ $(STAMP): pyproject.toml requirements.lock
 demo: $(STAMP)
 	$(VENV)/bin/cpapfit demo
 
-test: $(STAMP)
+test: $(STAMP) $(CHROMIUM)
 	$(PY) -m pytest -q
+
+# The report test opens report.html in headless Chromium: Debian's package, no browser download.
+$(CHROMIUM):
+	apt-get update -q
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium
 
 clean:
 	rm -rf $(VENV) cpapfit-demo

@@ -4,7 +4,6 @@ Errors the user can cause are printed as one line on stderr with exit code 2, ne
 """
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -16,15 +15,15 @@ from .evaluate.fit import FitParams
 from .io import load_scan
 from .io.cushion import load_cushion
 from .io.landmarks import landmarks_record
-from .io.design import design_files, evaluation_record, registration_ply
+from .io.design import evaluation_record, registration_ply
 from .io.phantom import write_phantom
 from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import design_job, user_landmarks
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
-from .pipeline import Alignment, align, design, evaluate, face_for, missing_stages, register_template, stage_table
-from .report.pictures import residual_picture, template_regions_picture
+from .pipeline import Alignment, align, evaluate, face_for, missing_stages, register_template, stage_table
+from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
 
@@ -111,11 +110,16 @@ def fit_summary(fit: dict) -> str:
     return "; ".join(lines)
 
 
+def report_summary(out: Path, fit: dict) -> str:
+    """Where the report is and its headline numbers (custom vs generic)."""
+    return f"report: {out / 'report.html'} (open it in a browser)\n  {fit_summary(fit)}"
+
+
 def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
         run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage)
     info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
-    info(fit_summary(run.fit))
+    info(report_summary(Path(args.out), run.fit))
     return 0
 
 
@@ -162,26 +166,24 @@ def cmd_demo(args) -> int:
     out = Path(args.out)
     subject = out / "subject"
     info(f"cpapfit demo: synthetic subject (seed {args.seed}) -> {subject}")
-    write_phantom(make_phantom(args.seed), subject)
-    scan = load_scan(subject)
-    write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
-    summaries = {"scan": scan_summary(scan), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
-    d = design(scan, "nasal")
+    with stage_display(args.quiet, args.verbose) as on_stage:
+        on_stage("synthetic subject")
+        write_phantom(make_phantom(args.seed), subject)
+        write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
+        run = design_job(subject, out / "design", "nasal", on_stage=on_stage)
+    d, fit = run.design, run.fit
+    summaries = {"scan": scan_summary(load_scan(subject)), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
     summaries.update(alignment_summaries(d.alignment))
-    reg = d.registration
-    files = design_files(d, scan)
-    written = write_files(out / "design", files)
-    title = f"synthetic subject {args.seed}: registration residual"
-    write_bytes(out / "residual.png", residual_picture(reg.vertices, load_template().faces, reg.residual, d.alignment.similarity, title))
-    summaries["nonrigid"] = registration_summary(reg) + f" (picture: {out / 'residual.png'})"
+    summaries["nonrigid"] = registration_summary(d.registration)
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
-    fit = json.loads(files["fit.json"])
     summaries["cushion"] = design_summary(fit)
+    summaries["export"] = f"{len(run.files)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
     summaries["evaluate"] = fit_summary(fit)
-    summaries["export"] = f"{len(written)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
+    summaries["report"] = f"report.html and {sum(name.endswith('.png') for name in run.files)} pictures in {out / 'design'}"
     for stage in stage_table(summaries):
         print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
     print(f"stages not built yet: {', '.join(missing_stages()) or 'none'}.")
+    print(report_summary(out / "design", fit))
     return 0
 
 
@@ -219,6 +221,11 @@ def cmd_landmarks(args) -> int:
     return 0
 
 
+def add_progress_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--verbose", action="store_true", help="print each stage's time")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="cpapfit", description="A personalised CPAP mask cushion from a facial depth scan.")
     ap.add_argument("--version", action="version", version=f"cpapfit {__version__}")
@@ -227,6 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="run every built stage on a synthetic subject (no input needed)")
     p.add_argument("--out", default="cpapfit-demo", help="output folder (default: ./cpapfit-demo)")
     p.add_argument("--seed", type=int, default=0, help="synthetic subject seed (default 0)")
+    add_progress_options(p)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("phantom", help="write a synthetic RGB-D subject with ground truth")
@@ -255,8 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
-            p.add_argument("--quiet", action="store_true", help="no progress display")
-            p.add_argument("--verbose", action="store_true", help="print each stage's time")
+            add_progress_options(p)
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic (stock) cushion of --mask")

@@ -22,11 +22,12 @@ from . import __version__
 from .errors import CpapfitError, InputError
 from .io import load_scan
 from .io.design import design_files
+from .io.report import report_files
 from .io.landmarks import read_landmarks
 from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files
 from .landmarks.types import Landmarks
-from .pipeline import design
+from .pipeline import Design, design
 from .scan import Scan
 from .template import load_template
 
@@ -46,25 +47,29 @@ def user_landmarks(path: str | Path | None, scan: Scan) -> Landmarks | None:
 @dataclass(frozen=True)
 class DesignRun:
     """What one design run wrote: `fit` (the contents of fit.json), how the scan's unit was decided,
-    and the names of the files written."""
+    the names of the files written, and the design itself."""
 
     fit: dict
     units_note: str
     files: tuple[str, ...]
+    design: Design
 
 
 def design_job(
     scan_path: str | Path, out_dir: str | Path, mask: str = "nasal", landmarks_path: str | Path | None = None,
     units: str = "auto", on_stage: Callable[[str], None] = _silent,
 ) -> DesignRun:
-    """`cpapfit design`: read the scan (and landmarks), design, write every file atomically to `out_dir`."""
+    """`cpapfit design`: read the scan (and landmarks), design, build the report, write every file
+    atomically to `out_dir`."""
     on_stage("reading the scan")
     scan = load_scan(Path(scan_path), units)
     d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage)
-    on_stage("writing files")
     files = design_files(d, scan)
+    on_stage("report")
+    files |= report_files(d, scan, files)
+    on_stage("writing files")
     write_files(Path(out_dir), files)
-    return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files))
+    return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files), d)
 
 
 @dataclass(frozen=True)

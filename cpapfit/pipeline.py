@@ -3,7 +3,9 @@
 from dataclasses import dataclass
 from typing import Callable
 
+import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from .align.check import FaceCheck
 from .align.initial import initial_alignment
@@ -27,7 +29,7 @@ STAGES = (
     ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
-BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate"}
+BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate", "report"}
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,10 @@ class Design:
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
     fits: dict  # {"custom" | "generic": CushionFit}, both at the custom cushion's recommended force
     fit_params: FitParams
+
+    def preload_at(self, points: np.ndarray) -> np.ndarray:
+        """(K,) mm: the pre-load at the seal-curve point nearest each of (K, 3) `points`."""
+        return self.preload.mm[cKDTree(self.contact.curve).query(points)[1]]
 
 
 def _silent(stage: str) -> None:

@@ -29,7 +29,11 @@ def test_demo_runs_every_built_stage_and_says_what_is_missing(cli, tmp_path):
     assert "safe window" in out and "stages not built yet: report" in out
     assert (tmp_path / "subject" / "depth.png").is_file()
     assert Image.open(tmp_path / "template_regions.png").size == (640, 480)
-    assert (tmp_path / "design" / "cushion.stl").is_file() and (tmp_path / "residual.png").is_file()
+    assert (tmp_path / "design" / "cushion.stl").is_file() and (tmp_path / "design" / "registration_residual.png").is_file()
+    report = tmp_path / "design" / "report.html"
+    assert f"report: {report}" in out and "custom: median" in out and "generic: median" in out
+    page = report.read_text()
+    assert 'data-key="seated_along_mask_axis.generic.seated_gap_median_mm"' in page and "not evaluated yet" in page
 
 
 def test_phantom_command_writes_a_capture(cli, tmp_path):

@@ -59,7 +59,9 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
     names = {p.name for p in out.iterdir()}
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
-                     "mould_left.stl", "mould_right.stl", "mould_core.stl"}
+                     "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
+                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png"}
+    assert f"report: {out / 'report.html'}" in err
     curve = json.loads((out / "contact_curve.json").read_text())
     pts = np.array(curve["points"])
     assert curve["units"] == "mm" and pts.shape[1] == 3
@@ -96,16 +98,9 @@ def test_generic_cushion_is_placed_and_its_gaps_reported(designed):
     custom, generic = d.fits["custom"], d.fits["generic"]
     assert generic.rim.covered.mean() > 0.5 and custom.rim.covered.mean() > 0.5
     c = custom.rim.covered
-    unloaded = custom.rim.clearance[c] + _preload_at(d, custom.rim.points[c])  # the rim without its pre-load
+    unloaded = custom.rim.clearance[c] + d.preload_at(custom.rim.points[c])  # the rim without its pre-load
     assert np.median(np.abs(unloaded)) < 0.5
     assert generic.summary()["gap_before_load_max_mm"] > 1.0
-
-
-def _preload_at(d, points):
-    """The design's pre-load (mm) at the seal-curve point nearest each of `points`."""
-    from scipy.spatial import cKDTree
-
-    return d.preload.mm[cKDTree(d.contact.curve).query(points)[1]]
 
 
 def test_mould_encloses_exactly_the_cushion(designed):

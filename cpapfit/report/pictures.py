@@ -1,24 +1,39 @@
-"""Pictures of the template and registrations, ray-cast offscreen (no display needed); plots and
-legends with matplotlib's Agg canvas."""
+"""The report's pictures, ray-cast offscreen (no display needed) and laid out with matplotlib.
 
-import io
+Each picture function takes plain arrays (mm, scan frame) and pre-rendered `Shot`s of the face
+(one rendering serves several pictures) and returns PNG bytes; `loop_image` and `rim_image`
+return the (H, W, 3) uint8 picture itself."""
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.cm import ScalarMappable
-from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
 from ..align.similarity import Similarity
+from ..landmarks.types import Landmarks
 from ..phantom import TEMPLATE_TO_CAMERA
 from ..render import raycast, shade
 from ..scan import Intrinsics
 from ..template import Template
+from .draw import draw_dots, draw_loop
+from .figure import FONT, ColourScale, panels_png, png
+from .frame import GREY_SKIN, Face, Shot, around_seal, face_view, place_name, shoot, to_pixels, whole_face_view
+from .rim import KPA_TO_MMHG, loop_lengths
 
 SKIN = np.array([0.85, 0.68, 0.58])
 REGION_COLOURS = {"nasal": np.array([0.15, 0.45, 0.95]), "oronasal": np.array([0.95, 0.3, 0.15])}
 CURVE_COLOUR = np.array([1.0, 1.0, 1.0])
+CUSHION_COLOUR = np.array([0.45, 0.7, 0.95])
 RESIDUAL_MAX_MM = 1.0
+CUSHION_FRAME_MM = 150.0  # picture height around the cushion
+ON_SCAN, OFF_SCAN = "#1f78b4", "#e31a1c"
+SEALED, OPEN = "#1a9850", "#d73027"
+OPEN_RGB = np.array([20, 20, 20], dtype=np.uint8)
+NO_DATA_RGB = np.array([150, 150, 150], dtype=np.uint8)
+LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "generic": {"color": "#e08214", "linestyle": "--"}}
+
+
+def _rgb(hex_colour: str) -> np.ndarray:
+    return np.array([int(hex_colour[i:i + 2], 16) for i in (1, 3, 5)], dtype=np.uint8)
 
 
 def frontal_picture(vertices: np.ndarray, faces: np.ndarray, albedo: np.ndarray, width: int = 640, height: int = 480) -> np.ndarray:
@@ -39,19 +54,102 @@ def template_regions_picture(template: Template, width: int = 640, height: int =
 
 
 def residual_picture(vertices: np.ndarray, faces: np.ndarray, residual: np.ndarray, similarity: Similarity, title: str) -> bytes:
-    """PNG bytes: the registered template seen from the front, coloured by the registration residual
-    (mm, 0-1 mm scale; grey where unmatched), with a labelled colour bar."""
-    frame = ((vertices - similarity.translation) @ similarity.rotation) / similarity.scale  # back to the template frame
-    cmap = colormaps["viridis"]
-    albedo = np.where(np.isfinite(residual)[:, None], cmap(np.clip(np.nan_to_num(residual), 0, RESIDUAL_MAX_MM) / RESIDUAL_MAX_MM)[:, :3], 0.6)
-    image = frontal_picture(frame, faces, albedo)
-    fig = Figure(figsize=(6.4, 4.8), dpi=100)
+    """PNG: the registered template (N, 3) mm seen from the front, coloured by the registration
+    residual (N,) mm (0-1 mm scale; grey where unmatched), with a labelled colour bar."""
+    scale = ColourScale(colormaps["viridis"], 0.0, RESIDUAL_MAX_MM, "distance to the scan (mm); grey: no scan data")
+    albedo = np.where(np.isfinite(residual)[:, None], scale.rgb01(np.nan_to_num(residual)), 0.6)
+    shot = shoot(Face(vertices, faces, albedo), whole_face_view(similarity))
+    return panels_png([shot.image], [title], "How closely the template follows the scan", scale)
+
+
+def landmarks_picture(shot: Shot, landmarks: Landmarks) -> bytes:
+    """PNG: the scan from the front with its landmarks coloured by confidence (hidden ones not drawn)."""
+    px, seen = to_pixels(shot, landmarks.points)
+    scale = ColourScale(colormaps["RdYlGn"], 0.0, 1.0, "landmark confidence (weight in the alignment)")
+    image = draw_dots(shot.image, px[seen], scale.rgb(landmarks.confidence[seen]), radius=3.5)
+    low = int((landmarks.confidence < 0.5).sum())
+    title = f"{len(landmarks.points)} landmarks found ({landmarks.path}); {low} with confidence below 0.5"
+    return panels_png([image], [title], "The scan and its landmarks", scale)
+
+
+def loop_image(shot: Shot, points: np.ndarray, colours: np.ndarray, width: int = 7) -> np.ndarray:
+    """(H, W, 3) uint8: the shot with the closed loop of (K, 3) mm points drawn in (K, 3) uint8 colours."""
+    px, seen = to_pixels(shot, points)
+    return draw_loop(shot.image, px, seen, colours, width)
+
+
+def contact_picture(shots: tuple[Shot, Shot], curve: np.ndarray, on_scan: np.ndarray) -> bytes:
+    """PNG: the seal curve (K, 3) mm on the scan in a whole-face and a close-up shot; red where the
+    scan has no data under it (on_scan (K,) False)."""
+    colours = np.where(on_scan[:, None], _rgb(ON_SCAN), _rgb(OFF_SCAN))
+    images = [loop_image(shot, curve, colours, width) for shot, width in zip(shots, (4, 7))]
+    title = f"{100 * on_scan.mean():.0f} % of the seal curve lies on scan data"
+    legend = ((ON_SCAN, "on the scan"), (OFF_SCAN, "no scan data (follows the template)"))
+    return panels_png(images, [title, "close-up"], "Where the cushion will touch the face", legend=legend)
+
+
+def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similarity: Similarity) -> bytes:
+    """PNG: the cushion solid ((N, 3) mm, (M, 3)) on the face, from the front and turned 50 degrees."""
+    skin = np.tile(GREY_SKIN, (len(face.vertices), 1)) if face.albedo is None else face.albedo
+    both = Face(np.vstack([face.vertices, vertices]), np.vstack([face.faces, faces + len(face.vertices)]),
+                np.vstack([skin, np.tile(CUSHION_COLOUR, (len(vertices), 1))]))
+    extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(vertices, axis=0).max()))
+    images = [shoot(both, face_view(similarity, vertices.mean(axis=0), extent, yaw)).image for yaw in (0.0, 50.0)]
+    return panels_png(images, ["front", "turned 50° (patient's right side)"], "The custom cushion on the face")
+
+
+def rim_image(shot: Shot, points: np.ndarray, values: np.ndarray, scale: ColourScale, open_: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, 3) uint8: the shot with a rim (K, 3) mm drawn in the colours of its (K,) values, grey where
+    a value is NaN (no skin found), near-black where open."""
+    colours = scale.rgb(np.nan_to_num(values))
+    colours[np.isnan(values)] = NO_DATA_RGB
+    if open_ is not None:
+        colours[open_] = OPEN_RGB
+    return loop_image(shot, points, colours)
+
+
+def rim_map_picture(shot: Shot, rims: dict, scale: ColourScale, titles: dict, heading: str) -> bytes:
+    """PNG: each rim of {name: (points (K, 3) mm, values (K,), open (K,) bool or None)} coloured on the
+    same close-up shot, side by side, with the scale's colour bar."""
+    images = [rim_image(shot, p, v, scale, o) for p, v, o in rims.values()]
+    any_open = any(o is not None and o.any() for _, _, o in rims.values())
+    any_nan = any(np.isnan(v).any() for _, v, _ in rims.values())
+    legend = ((OPEN_RGB / 255, "open: no contact (leak)"),) * any_open + ((NO_DATA_RGB / 255, "no skin found under the rim (hole in the scan)"),) * any_nan
+    return panels_png(images, [titles[n] for n in rims], heading, scale, legend)
+
+
+def leak_picture(shot: Shot, rims: dict, titles: dict) -> bytes:
+    """PNG: where each rim of {name: (points (K, 3) mm, open (K,) bool)} leaves the skin (red), side by side."""
+    images = [loop_image(shot, p, np.where(o[:, None], _rgb(OPEN), _rgb(SEALED))) for p, o in rims.values()]
+    return panels_png(images, [titles[n] for n in rims], "Where the seal would leak", legend=((SEALED, "sealed"), (OPEN, "open (leak)")))
+
+
+def profile_picture(similarity: Similarity, mask: str, rims: dict, ylabel: str, heading: str, window: tuple | None = None,
+                    mmhg: bool = False) -> bytes:
+    """PNG: values along each rim of {name: (points (K, 3) mm, values (K,), open (K,) bool or None)}
+    against the position around the seal, custom vs generic; a window (lo, hi) kPa shaded; open
+    stretches marked; a mmHg axis beside kPa if `mmhg`."""
+    fig = Figure(figsize=(9.0, 4.2), dpi=100, layout="constrained")
     ax = fig.subplots()
-    ax.imshow(image)
-    ax.set_axis_off()
-    ax.set_title(title, fontsize=11)
-    bar = fig.colorbar(ScalarMappable(Normalize(0, RESIDUAL_MAX_MM), cmap), ax=ax, fraction=0.04, pad=0.02)
-    bar.set_label("distance to the scan (mm); grey: no scan data")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", bbox_inches="tight", metadata={"Software": None})
-    return buf.getvalue()
+    if window:
+        ax.axhspan(*window, color="#a1d99b", alpha=0.45, label=f"safe window {window[0]:.1f}-{window[1]:.1f} kPa")
+    for name, (points, values, open_) in rims.items():
+        angle = around_seal(points, similarity)
+        order = np.argsort(angle)
+        ax.plot(angle[order], values[order], linewidth=2, label=name, **LINE_STYLES.get(name, {}))
+        if open_ is not None and open_.any():
+            ax.plot(angle[open_], np.zeros(open_.sum()), "|", color=OPEN, markersize=14, markeredgewidth=2,
+                    label=f"{name}: open ({loop_lengths(points)[open_].sum():.0f} mm)")
+    ticks = [0, 90, 180, 270, 360]
+    ax.set_xticks(ticks, [place_name(t % 360, mask).removeprefix("the ") for t in ticks], fontsize=FONT - 1)
+    ax.set_xlim(0, 360)
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("position around the seal, seen from the front (clockwise from the nasal bridge)", fontsize=FONT)
+    ax.set_ylabel(ylabel, fontsize=FONT)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=FONT - 1, loc="upper right")
+    ax.set_title(heading, fontsize=FONT + 2, fontweight="bold")
+    if mmhg:
+        right = ax.secondary_yaxis("right", functions=(lambda k: k * KPA_TO_MMHG, lambda m: m / KPA_TO_MMHG))
+        right.set_ylabel("mmHg", fontsize=FONT)
+    return png(fig)

@@ -1,0 +1,70 @@
+"""Warnings for the person reading the report: what in the scan or the fit needs a second look,
+and when to rescan. Each is one sentence that says what was measured and what to do."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..align.similarity import Similarity
+from ..landmarks.types import Landmarks
+from .frame import around_seal, place_name
+from .rim import has_pressure, loop_lengths, longest_run_mm
+
+LOW_CONFIDENCE = 0.5  # a landmark below this weight disagrees with the others
+LOW_CONFIDENCE_SHARE = 0.2  # warn when more than this share of the landmarks is low
+HOLE_MM = 8.0  # warn when the scan has no data under a longer stretch of the seal
+SEAL_ON_SCAN = 0.9  # warn when less of the seal curve lies on scan data
+RESIDUAL_MM = 0.5  # warn when the registered template lies farther from the scan (median)
+
+
+@dataclass(frozen=True)
+class Notice:
+    """level: "rescan" (the scan is not good enough under the seal) or "check" (look at a picture); text: one sentence."""
+
+    level: str
+    text: str
+
+
+def landmark_notices(landmarks: Landmarks) -> list[Notice]:
+    """Low landmark confidence, or no landmarks found on the face at all."""
+    out = []
+    if landmarks.path == "fallback":
+        out.append(Notice("check", "No face was detected in the image: the template was placed by its shape alone. "
+                                   "Check the landmarks and contact pictures."))
+    low = landmarks.confidence < LOW_CONFIDENCE
+    if low.mean() > LOW_CONFIDENCE_SHARE:
+        out.append(Notice("check", f"{low.sum()} of {len(low)} landmarks ({100 * low.mean():.0f} %) disagree with the others "
+                                   f"(confidence below {LOW_CONFIDENCE}): check that the template sits on the face."))
+    return out
+
+
+def scan_notices(curve: np.ndarray, on_scan: np.ndarray, residual_median_mm: float, similarity: Similarity, mask: str) -> list[Notice]:
+    """Holes in the scan under the seal curve (K, 3) mm with on_scan (K,) bool, and a loose registration."""
+    out = []
+    hole_mm, middle = longest_run_mm(curve, ~on_scan)
+    if hole_mm > HOLE_MM or on_scan.mean() < SEAL_ON_SCAN:
+        where = place_name(around_seal(curve, similarity)[middle], mask) if middle >= 0 else "the seal"
+        out.append(Notice("rescan", f"The scan has no data under {100 * (1 - on_scan.mean()):.0f} % of the seal (longest stretch "
+                                    f"{hole_mm:.0f} mm, near {where}); there the cushion follows the template, not this face. Rescan advised."))
+    if residual_median_mm > RESIDUAL_MM:
+        out.append(Notice("rescan", f"The template lies {residual_median_mm:.2f} mm (median) from the scan, more than {RESIDUAL_MM} mm: "
+                                    "the scan may be noisy or the face may have moved. Rescan advised."))
+    return out
+
+
+def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, mask: str) -> list[Notice]:
+    """The custom cushion pressing above the window's top, or open (leaking), with where."""
+    if window_kpa is None or not has_pressure(rims):
+        return []
+    rim = rims["custom"]
+    angle = around_seal(rim.points, similarity)
+    out = []
+    for flag, what, advice in (
+        (rim.pressure_kpa > window_kpa[1], f"presses above {window_kpa[1]:.1f} kPa", "lower the headgear force or the interference"),
+        (np.asarray(rim.open, dtype=bool), "is open (leaks)", "raise the headgear force or rescan"),
+    ):
+        if flag.any():
+            length, middle = longest_run_mm(rim.points, flag)
+            out.append(Notice("check", f"The custom cushion {what} over {loop_lengths(rim.points)[flag].sum():.0f} mm of its rim "
+                                       f"(longest stretch {length:.0f} mm, near {place_name(angle[middle], mask)}): {advice}."))
+    return out

@@ -1,0 +1,152 @@
+"""The report of a design as files: the pictures (PNG) and report.html, from the design, the
+scan, the fit.json record and, once evaluated, each cushion's rim pressure.
+
+Pure: the caller (cpapfit/io/report.py) supplies what comes from outside (input hash, date)."""
+
+from dataclasses import dataclass
+
+import numpy as np
+from matplotlib import colormaps
+
+from .. import __version__
+from ..pipeline import Design
+from ..scan import Scan
+from ..template import load_template
+from . import pictures as pic
+from .advice import landmark_notices, fit_notices, scan_notices
+from .figure import ColourScale, zoned_cmap
+from .frame import Face, seal_view, shoot, whole_face_view
+from .page import Page, Picture, lookup, report_html
+from .rim import RimFit, loop_lengths
+from .viewer import viewer_face, viewer_figure, viewer_html
+
+GAP_SCALE = ColourScale(colormaps["plasma"], 0.0, 3.0, "gap between rim and skin (mm)", ((1.0, "1 mm"),))
+RIM_SAMPLES = 256
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a report comes from: input path and its SHA-256, the run date (text), the command's settings."""
+
+    source: str
+    sha256: str
+    date: str
+
+
+def evaluated_rims(d: Design) -> dict:
+    """{"custom" | "generic": RimFit} from the design's evaluation: the rim's place on the skin, the gap
+    before load (the custom one's without its pre-load, i.e. its shape's fit), pressure and openings."""
+    rims = {}
+    for name, fit in d.fits.items():
+        rim, c = fit.rim, fit.rim.covered
+        clearance = rim.clearance + (d.preload_at(rim.points) if name == "custom" else 0.0)
+        where = np.where(c[:, None], rim.skin, rim.points)
+        rims[name] = RimFit(where, clearance - np.nanmin(clearance[c]), fit.pressure_kpa, np.nan_to_num(fit.opening_mm) > 0)
+    return rims
+
+
+def scan_face(scan: Scan, d: Design) -> Face:
+    """The surface the pictures show: the scan with its colours, or the registered template for a point cloud."""
+    if scan.is_point_cloud:
+        return Face(d.registration.vertices, load_template().faces)
+    return Face(scan.vertices, scan.faces, None if scan.colors is None else scan.colors / 255.0)
+
+
+def pressure_scale(rims: dict, window_kpa: tuple) -> ColourScale:
+    """Blue below the window, green in it, red above, up to 1.5 times its top or the highest pressure."""
+    lo, hi = window_kpa
+    top = np.ceil(2.0 * max(1.5 * hi, *(float(np.nanmax(r.pressure_kpa)) for r in rims.values()))) / 2.0
+    return ColourScale(zoned_cmap(lo / top, hi / top), 0.0, top, "contact pressure (kPa)",
+                       ((lo, f"seal {lo:.1f}"), (hi, f"limit {hi:.1f}")))
+
+
+def gap_pictures(shot, similarity, mask: str, rims: dict, fit: dict) -> list[Picture]:
+    """The seated gaps along both rims: map and profile."""
+    titles = {n: f"{n}: gap median {np.nanmedian(r.gap_mm):.1f} mm, {100 * np.nanmean(r.gap_mm > 1.0):.0f} % over 1 mm" for n, r in rims.items()}
+    arrays = {n: (r.points, r.gap_mm, None) for n, r in rims.items()}
+    return [
+        Picture("rim_gap.png", "Gap under the rim, custom vs generic",
+                "Each cushion pushed onto the face as a rigid body until its rim first touches the skin; colour: the gap left "
+                "between rim and skin (the custom cushion's shape, before its pressure-compensating pre-load). Before the skin "
+                "gives, so larger gaps mean more headgear force to close them.",
+                pic.rim_map_picture(shot, arrays, GAP_SCALE, titles, "Gap between rim and skin (rigid, before compression)")),
+        Picture("rim_gap_profile.png", "Gap along the rim",
+                "The same gaps along the seal, starting at the nasal bridge and going round clockwise as seen from the front.",
+                pic.profile_picture(similarity, mask, arrays, "gap between rim and skin (mm)", "Gap along the rim")),
+    ]
+
+
+def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple, fit: dict) -> list[Picture]:
+    """Contact pressure maps, pressure along the rim, and leak locations, custom vs generic."""
+    scale = pressure_scale(rims, window_kpa)
+    arrays = {n: (r.points, np.asarray(r.pressure_kpa), np.asarray(r.open, dtype=bool)) for n, r in rims.items()}
+    in_window = {n: f"{n}: {100 * (lookup(fit, f'{n}.window_fraction') or 0):.0f} % of the rim in the window, "
+                    f"peak {float(np.nanmax(r.pressure_kpa)):.1f} kPa" for n, r in rims.items()}
+    leaks = {n: f"{n}: open over {loop_lengths(r.points)[np.asarray(r.open, dtype=bool)].sum():.0f} mm of rim"
+                + (f", leak {lookup(fit, f'{n}.leak_l_min'):.2f} L/min" if lookup(fit, f"{n}.leak_l_min") is not None else "")
+             for n, r in rims.items()}
+    lo, hi = window_kpa
+    return [
+        Picture("rim_pressure.png", "Contact pressure on the rim, custom vs generic",
+                f"Green: inside the safe window ({lo:.1f}-{hi:.1f} kPa: enough to seal against the CPAP pressure, below the "
+                "pressure that closes skin capillaries); blue: too little to seal reliably; orange to red: above the limit, "
+                "risk of pressure sores; near-black: no contact.",
+                pic.rim_map_picture(shot, arrays, scale, in_window, "Contact pressure along the rim")),
+        Picture("rim_pressure_profile.png", "Pressure along the rim",
+                "Contact pressure along the seal from the nasal bridge, clockwise as seen from the front; the green band is the safe window.",
+                pic.profile_picture(similarity, mask, arrays, "contact pressure (kPa)", "Contact pressure along the rim", window_kpa, mmhg=True)),
+        Picture("leak.png", "Where the seal would leak",
+                "Red: the rim does not touch the skin at the set headgear force, so air escapes there.",
+                pic.leak_picture(shot, {n: (a[0], a[2]) for n, a in arrays.items()}, leaks)),
+    ]
+
+
+def design_pictures(d: Design, face: Face, whole, close) -> list[Picture]:
+    """The scan understood: landmarks, registration residual, contact curve, cushion on the face."""
+    sim, reg = d.alignment.similarity, d.registration
+    res = reg.residual[reg.valid]
+    return [
+        Picture("scan_landmarks.png", "The scan and its landmarks",
+                "Landmarks found on the scan, coloured by how well each agrees with the others in the alignment "
+                "(green: agrees; red: rejected as wrong). They should sit on the eyes, nose, lips and face outline.",
+                pic.landmarks_picture(whole, d.alignment.landmarks)),
+        Picture("registration_residual.png", "The template on the scan",
+                "The template face warped onto the scan, coloured by its remaining distance to the scan; dark everywhere "
+                "means the face shape was captured. Grey: no scan data there (holes, hair, edges).",
+                pic.residual_picture(reg.vertices, load_template().faces, reg.residual, sim,
+                                     f"residual median {np.median(res):.2f} mm, 95th percentile {np.percentile(res, 95):.2f} mm")),
+        Picture("contact_curve.png", "Where the cushion touches the face",
+                "The seal line carried from the template onto this face. Red stretches have no scan data under them; "
+                "the cushion follows the template there.",
+                pic.contact_picture((whole, close), d.contact.curve, d.contact.on_scan)),
+        Picture("cushion_on_face.png", "The custom cushion on the face",
+                "The printable cushion (blue) as designed on the scan.",
+                pic.cushion_picture(face, d.solid.vertices, d.solid.faces, sim)),
+    ]
+
+
+def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance) -> dict[str, bytes]:
+    """The pictures and report.html of a design, as {name: bytes}."""
+    sim, mask = d.alignment.similarity, d.contact.mask
+    rims, window_kpa = evaluated_rims(d), d.fit_params.window_kpa
+    face = scan_face(scan, d)
+    whole = shoot(face, whole_face_view(sim))
+    close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])))
+    pictures = design_pictures(d, face, whole, close) + gap_pictures(close, sim, mask, rims, fit)
+    pictures += pressure_pictures(close, sim, mask, rims, window_kpa, fit)
+    scale = pressure_scale(rims, window_kpa)
+    values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}
+    centre = np.mean(d.contact.curve, axis=0)
+    fig = viewer_figure(viewer_face(face, centre), Face(d.solid.vertices, d.solid.faces),
+                        {n: (r.points, values[n]) for n, r in rims.items()}, scale, sim, d.cushion.axis)
+    reg = d.registration
+    notices = (landmark_notices(d.alignment.landmarks)
+               + scan_notices(d.contact.curve, d.contact.on_scan, float(np.median(reg.residual[reg.valid])), sim, mask)
+               + fit_notices(rims, window_kpa, sim, mask))
+    trace = (("cpapfit version", __version__), ("date", provenance.date), ("input", provenance.source),
+             ("input SHA-256", provenance.sha256), ("scan units", scan.units_note or scan.units),
+             ("mask", mask), ("landmarks", f"{len(d.alignment.landmarks.points)} by {d.alignment.landmarks.path}"),
+             ("cushion parameters", ", ".join(f"{k} {v:g}" for k, v in vars(d.cushion.params).items())))
+    page = Page(f"{mask.capitalize()} CPAP cushion for {provenance.source.rstrip('/').split('/')[-1]}", fit, tuple(notices),
+                tuple(pictures), trace, viewer_html(fig))
+    return {**{p.name: p.png for p in pictures}, "report.html": report_html(page)}

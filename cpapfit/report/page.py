@@ -1,0 +1,188 @@
+"""report.html: one self-contained page (pictures inline, plotly.js inline, no network) that a
+clinician reads at a glance: warnings, custom vs generic numbers, the 3-D view, the pictures, all
+numbers of fit.json with units, and where the result came from.
+
+Every number taken from fit.json is shown in an element with data-key (its path in fit.json) and
+data-scale (the factor applied for display, e.g. 100 for a percentage), so tests can compare."""
+
+import base64
+import html
+from dataclasses import dataclass
+
+
+# key suffix -> (unit, display factor, decimals)
+UNITS = (
+    ("_fraction", "%", 100.0, 1), ("_mm", "mm", 1.0, 2), ("_kpa", "kPa", 1.0, 2), ("_mmhg", "mmHg", 1.0, 1),
+    ("_cmh2o", "cmH₂O", 1.0, 1), ("_force_n", "N", 1.0, 1), ("_l_min", "L/min", 1.0, 2), ("_cv", "", 1.0, 3),
+)
+HEADLINE = (  # (path under fit["custom"|"generic"] or under the seating record, label)
+    ("contact_fraction", "rim in contact with the skin"),
+    ("window_fraction", "rim within the safe pressure window"),
+    ("pressure_mean_kpa", "mean contact pressure"),
+    ("pressure_cv", "pressure variation along the rim (coefficient of variation)"),
+    ("pressure_max_kpa", "peak contact pressure"),
+    ("pressure_max_mmhg", "peak contact pressure"),
+    ("leak_l_min", "leak at the set CPAP pressure"),
+)
+SEATED = (
+    ("seated_gap_median_mm", "rim-to-skin gap, median (rigid cushion, before the skin gives)"),
+    ("seated_gap_max_mm", "rim-to-skin gap, largest"),
+    ("rim_over_1mm_fraction", "rim more than 1 mm off the skin"),
+)
+SEATED_KEY = "seated_along_mask_axis"
+CUSHIONS = ("custom", "generic")
+
+
+@dataclass(frozen=True)
+class Picture:
+    """A picture of the report: file name, heading, caption (how to read it) and PNG bytes."""
+
+    name: str
+    heading: str
+    caption: str
+    png: bytes
+
+
+@dataclass(frozen=True)
+class Page:
+    """Everything report.html shows. fit: the fit.json record; traceability: [(label, text)]; viewer: an HTML fragment."""
+
+    title: str
+    fit: dict
+    notices: tuple
+    pictures: tuple
+    traceability: tuple
+    viewer: str
+
+
+def unit_of(key: str) -> tuple[str, float, int]:
+    """(unit, display factor, decimals) of a fit.json key, from its suffix."""
+    for suffix, unit, factor, decimals in UNITS:
+        if key.endswith(suffix):
+            return unit, factor, decimals
+    return "", 1.0, 3
+
+
+def value_cell(path: str, value, tag: str = "td") -> str:
+    """A cell showing a fit.json value; numbers carry data-key and data-scale."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        text = {True: "yes", False: "no", None: "—"}.get(value, value) if isinstance(value, (bool, type(None))) else value
+        text = ", ".join(map(str, text)) if isinstance(text, list) else str(text)
+        return f"<{tag}>{html.escape(text)}</{tag}>"
+    unit, factor, decimals = unit_of(path)
+    shown = f"{value * factor:.{decimals}f}" if isinstance(value, float) else str(value)
+    return f'<{tag} class="num" data-key="{path}" data-scale="{factor:g}">{shown}</{tag}>'
+
+
+def lookup(fit: dict, path: str):
+    """The value at a dotted path of a nested dict, or None."""
+    node = fit
+    for part in path.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def headline_table(fit: dict) -> str:
+    """Custom vs generic: the evaluation's numbers (when present) and the seated gaps."""
+    body = []
+    for key, label, prefix in [(k, label, "") for k, label in HEADLINE] + [(k, label, f"{SEATED_KEY}.") for k, label in SEATED]:
+        paths = [f"{prefix}{c}.{key}" for c in CUSHIONS]
+        if lookup(fit, paths[0]) is None:
+            continue
+        cells = "".join(value_cell(p, lookup(fit, p)) for p in paths)
+        body.append(f"<tr><th>{html.escape(label)}</th>{cells}<td>{html.escape(unit_of(key)[0])}</td></tr>")
+    head = "<tr><th></th><th>custom cushion</th><th>generic cushion</th><th>unit</th></tr>"
+    return f'<table class="headline"><thead>{head}</thead><tbody>{"".join(body)}</tbody></table>'
+
+
+def settings_line(fit: dict) -> str:
+    """The recommended headgear force and the CPAP pressure, or that they are not evaluated yet."""
+    force, cpap = fit.get("headgear_force_n"), fit.get("cpap_cmh2o")
+    if force is None:
+        return '<p class="force">Recommended headgear force: <b>not evaluated yet</b> (the pressure and leak evaluation is not built).</p>'
+    cpap_text = f" at a CPAP pressure of {value_cell('cpap_cmh2o', cpap, 'b')} cmH₂O" if cpap is not None else ""
+    return f'<p class="force">Recommended headgear force: {value_cell("headgear_force_n", force, "b")} N{cpap_text}.</p>'
+
+
+def flatten(record: dict, prefix: str = "") -> list[tuple[str, object]]:
+    """[(dotted path, leaf value)] of a nested dict, in order."""
+    out = []
+    for key, value in record.items():
+        path = f"{prefix}{key}"
+        out += flatten(value, path + ".") if isinstance(value, dict) else [(path, value)]
+    return out
+
+
+def numbers_table(fit: dict) -> str:
+    """Every value of fit.json, by its path, with its unit."""
+    rows = "".join(f"<tr><th><code>{html.escape(p)}</code></th>{value_cell(p, v)}<td>{html.escape(unit_of(p)[0])}</td></tr>"
+                   for p, v in flatten(fit))
+    return f'<table class="numbers"><thead><tr><th>fit.json</th><th>value</th><th>unit</th></tr></thead><tbody>{rows}</tbody></table>'
+
+
+def notices_block(notices: tuple) -> str:
+    if not notices:
+        return '<div class="notice ok">No warnings: the scan covers the seal and the template follows it.</div>'
+    rescan = any(n.level == "rescan" for n in notices)
+    head = '<p class="rescan">Rescan advised.</p>' if rescan else ""
+    items = "".join(f'<li class="{n.level}">{html.escape(n.text)}</li>' for n in notices)
+    return f'<div class="notice {"bad" if rescan else "warn"}"><h2>Warnings</h2>{head}<ul>{items}</ul></div>'
+
+
+def picture_block(p: Picture) -> str:
+    data = base64.b64encode(p.png).decode()
+    return (f'<figure id="{html.escape(p.name)}"><h3>{html.escape(p.heading)}</h3>'
+            f'<img src="data:image/png;base64,{data}" alt="{html.escape(p.heading)}">'
+            f"<figcaption>{html.escape(p.caption)} <span class=\"file\">({html.escape(p.name)})</span></figcaption></figure>")
+
+
+STYLE = """
+body{font:16px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",sans-serif;color:#1b1b1b;margin:0;background:#f4f5f7}
+main{max-width:1320px;margin:0 auto;padding:16px 24px;background:#fff}
+h1{font-size:1.7em;margin:.2em 0}h2{font-size:1.3em;margin:1.2em 0 .4em;border-bottom:2px solid #d0d4da}h3{margin:.2em 0}
+.sub{color:#555;margin:0 0 1em}
+table{border-collapse:collapse;margin:.4em 0}th,td{padding:4px 10px;border-bottom:1px solid #e1e4e8;text-align:left;vertical-align:top}
+td.num{text-align:right;font-variant-numeric:tabular-nums}
+table.headline{font-size:1.05em}table.headline th[scope],table.headline tbody th{font-weight:normal}
+table.numbers{font-size:.9em}
+.notice{padding:10px 16px;border-radius:6px;margin:1em 0}.notice h2{border:0;margin:0}
+.ok{background:#e5f5e0;border:1px solid #a1d99b}.warn{background:#fff4e0;border:1px solid #fdae6b}.bad{background:#fde0dd;border:1px solid #f768a1}
+.rescan{font-weight:bold;font-size:1.1em;color:#a50f15;margin:.3em 0}
+li.rescan{font-weight:normal;font-size:1em;color:inherit}
+.force{font-size:1.1em}
+figure{margin:1.2em 0}figure img{max-width:100%;height:auto;border:1px solid #e1e4e8}figcaption{color:#333;max-width:70em}
+.file{color:#777;font-size:.9em}
+#viewer-box{border:1px solid #e1e4e8}
+details summary{cursor:pointer;font-weight:bold;margin:.5em 0}
+"""
+
+
+def report_html(page: Page) -> bytes:
+    """The page as UTF-8 bytes (same page, same bytes)."""
+    trace = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in page.traceability)
+    pictures = "".join(picture_block(p) for p in page.pictures)
+    body = f"""<main>
+<h1>{html.escape(page.title)}</h1>
+<p class="sub">cpapfit report. All lengths in millimetres; pressures in kPa (1 kPa = 7.5 mmHg = 10.2 cmH₂O).</p>
+{notices_block(page.notices)}
+<h2>At a glance: custom vs generic cushion</h2>
+{settings_line(page.fit)}
+{headline_table(page.fit)}
+<h2>3-D view</h2>
+<p>Drag to turn, scroll to zoom, hover over a rim for its value. The buttons show the custom cushion or the generic cushion's rim.</p>
+<div id="viewer-box">{page.viewer}</div>
+<h2>Pictures</h2>
+{pictures}
+<h2>All numbers</h2>
+<details><summary>Every value in fit.json, with units</summary>{numbers_table(page.fit)}</details>
+<h2>Traceability</h2>
+<table class="trace">{trace}</table>
+</main>"""
+    doc = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{html.escape(page.title)}</title><style>{STYLE}</style></head>
+<body>{body}</body></html>
+"""
+    return doc.encode("utf-8")

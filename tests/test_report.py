@@ -1,0 +1,200 @@
+"""The report: pictures, warnings, report.html in headless Chromium offline, determinism.
+
+One design of the synthetic subject of seed 1 is shared by all tests; its report is built with
+a made-up pressure evaluation (the interface the evaluation fills) so every section is drawn."""
+
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from cpapfit.io import load_scan
+from cpapfit.io.design import design_files
+from cpapfit.io.report import input_sha256, run_date
+from cpapfit.pipeline import design
+from cpapfit.report.advice import landmark_notices, scan_notices
+from cpapfit.report.assemble import Provenance, pressure_scale, report_files, seated_rims
+from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
+from cpapfit.report.pictures import OPEN_RGB, rim_image
+from cpapfit.report.rim import RimFit, longest_run_mm
+
+from browser import CHROMIUM, Chromium
+
+WINDOW = (1.5, 4.3)
+PROVENANCE = Provenance("phantom1", "0" * 64, "2024-01-01 00:00 UTC")
+
+
+def made_up_pressure(rim: RimFit, peak: float, open_below: float) -> RimFit:
+    """A smooth pressure profile around the rim (kPa) with the stretch below open_below open."""
+    t = np.linspace(0.0, 2 * np.pi, len(rim.points), endpoint=False)
+    p = peak / 2 + peak / 2 * np.cos(2 * t)
+    is_open = p < open_below
+    return RimFit(rim.points, rim.gap_mm, np.where(is_open, 0.0, p), is_open)
+
+
+@pytest.fixture(scope="session")
+def designed(phantom1_dir):
+    scan = load_scan(phantom1_dir)
+    return scan, design(scan, "nasal")
+
+
+@pytest.fixture(scope="session")
+def evaluated(designed):
+    """Made-up evaluation: the custom rim inside the window, the generic one above it and open in places."""
+    _, d = designed
+    seated = seated_rims(d)
+    rims = {"custom": made_up_pressure(seated["custom"], 4.0, 0.0), "generic": made_up_pressure(seated["generic"], 6.0, 0.5)}
+    record = {}
+    for name, r in rims.items():
+        p = r.pressure_kpa
+        record[name] = {"contact_fraction": float(1 - r.open.mean()), "pressure_mean_kpa": float(p[~r.open].mean()),
+                        "pressure_cv": float(p[~r.open].std() / p[~r.open].mean()), "pressure_max_kpa": float(p.max()),
+                        "pressure_max_mmhg": float(p.max() * 7.50062),
+                        "window_fraction": float(((p >= WINDOW[0]) & (p <= WINDOW[1])).mean()), "leak_l_min": 0.5 * float(r.open.mean())}
+    return rims, {"cpap_cmh2o": 10.0, "headgear_force_n": 7.25, **record}
+
+
+@pytest.fixture(scope="session")
+def report(designed, evaluated, tmp_path_factory):
+    """(folder, {name: bytes}, fit record) of the report written to a folder."""
+    scan, d = designed
+    rims, numbers = evaluated
+    fit = json.loads(design_files(d, scan)["fit.json"]) | numbers
+    files = report_files(d, scan, fit, PROVENANCE, rims, WINDOW)
+    folder = tmp_path_factory.mktemp("report")
+    for name, data in files.items():
+        (folder / name).write_bytes(data)
+    (folder / "fit.json").write_text(json.dumps(fit))
+    return folder, files, fit
+
+
+EXPECTED_SIZES = {  # (width, height) px: panels of 640 x 480 with titles, colour bars, legends
+    "scan_landmarks.png": (780, 570), "registration_residual.png": (780, 570), "contact_curve.png": (1300, 605),
+    "cushion_on_face.png": (1300, 570), "rim_gap.png": (1420, 605), "rim_gap_profile.png": (900, 420),
+    "rim_pressure.png": (1420, 605), "rim_pressure_profile.png": (900, 420), "leak.png": (1300, 605),
+}
+
+
+def test_every_picture_is_there_of_its_size_and_not_blank(report):
+    _, files, _ = report
+    assert set(EXPECTED_SIZES) | {"report.html"} == set(files)
+    for name, size in EXPECTED_SIZES.items():
+        image = np.asarray(Image.open(io.BytesIO(files[name])).convert("RGB"))
+        assert image.shape[1::-1] == size, name
+        not_white = (image < 235).any(axis=2).mean()
+        colours = len(np.unique(image.reshape(-1, 3)[::7], axis=0))
+        least = 0.03 if name.endswith("profile.png") else 0.1  # a line plot is mostly paper, a rendering has the face
+        assert not_white > least and colours > 200, (name, not_white, colours)
+
+
+def test_rim_colours_follow_the_pressure_and_open_stretches_are_dark(designed, evaluated):
+    scan, d = designed
+    rims, _ = evaluated
+    rim = rims["generic"]
+    sim = d.alignment.similarity
+    shot = shoot(Face(scan.vertices, scan.faces), seal_view(sim, rim.points))
+    scale = pressure_scale(rims, WINDOW)
+    image = rim_image(shot, rim.points, rim.pressure_kpa, scale, rim.open).astype(int)
+    px, seen = to_pixels(shot, rim.points)
+    assert seen.mean() > 0.8
+    at = image[np.round(px[seen, 1]).astype(int), np.round(px[seen, 0]).astype(int)]
+    want = np.where(rim.open[seen, None], OPEN_RGB, scale.rgb(rim.pressure_kpa[seen])).astype(int)
+    close = np.abs(at - want).max(axis=1) <= 40  # neighbouring points (about 2 px apart) overdraw a little
+    assert close.mean() > 0.9, close.mean()
+    assert (np.abs(image - shot.image).sum(axis=2) > 0).mean() < 0.1  # the rest of the picture is untouched
+
+
+def test_points_behind_the_face_are_not_drawn(designed):
+    scan, d = designed
+    curve, axis = d.contact.curve, d.cushion.axis
+    shot = shoot(Face(scan.vertices, scan.faces), seal_view(d.alignment.similarity, curve))
+    _, in_front = to_pixels(shot, curve + 3.0 * axis)
+    px, behind = to_pixels(shot, curve - 15.0 * axis)
+    on_face = np.isfinite(shot.depth[np.round(px[:, 1]).astype(int), np.round(px[:, 0]).astype(int)])  # not seen through a hole
+    assert in_front.mean() > 0.9 and on_face.mean() > 0.5 and not behind[on_face].any()
+
+
+def test_longest_run_wraps_around_the_loop():
+    t = np.linspace(0, 2 * np.pi, 100, endpoint=False)
+    loop = 50.0 * np.stack([np.cos(t), np.sin(t), 0 * t], axis=1)  # circumference 314 mm, 3.14 mm per point
+    flag = np.zeros(100, dtype=bool)
+    flag[[95, 96, 97, 98, 99, 0, 1, 2, 3]] = True
+    flag[40:43] = True
+    length, middle = longest_run_mm(loop, flag)
+    assert length == pytest.approx(9 * 2 * np.pi * 50 / 100, rel=1e-3) and middle in (98, 99, 0)
+    assert longest_run_mm(loop, np.zeros(100, dtype=bool)) == (0.0, -1)
+
+
+def test_holes_under_the_seal_and_low_confidence_are_warned(designed):
+    _, d = designed
+    sim, curve = d.alignment.similarity, d.contact.curve
+    assert scan_notices(curve, np.ones(len(curve), dtype=bool), 0.1, sim, "nasal") == []
+    hole = np.ones(len(curve), dtype=bool)
+    hole[:10] = False  # about 12 mm at the start of the loop: the nasal bridge
+    (notice,) = scan_notices(curve, hole, 0.1, sim, "nasal")
+    assert notice.level == "rescan" and "nasal bridge" in notice.text and "Rescan advised" in notice.text
+    lm = d.alignment.landmarks
+    assert landmark_notices(lm) == []
+    doubtful = type(lm)(lm.points, lm.template_index, np.where(np.arange(len(lm.points)) % 3 == 0, 0.1, 1.0), lm.path)
+    assert "disagree" in landmark_notices(doubtful)[0].text
+
+
+def shown_numbers_match(shown: list, fit: dict) -> None:
+    """Every [data-key, data-scale, text] shown equals fit.json's value at that key, to the digits shown."""
+    for key, scale, text in shown:
+        value = fit
+        for part in key.split("."):
+            value = value[part]
+        decimals = len(text.split(".")[1]) if "." in text else 0
+        assert math.isclose(float(text), value * float(scale), abs_tol=0.5 * 10 ** -decimals + 1e-9), (key, text, value)
+
+
+def test_report_html_in_headless_chromium_offline(report, tmp_path):
+    assert CHROMIUM.exists(), "Debian's chromium is needed: `make test` installs it (apt-get install chromium)"
+    folder, _, fit = report
+    browser = Chromium(tmp_path / "profile")
+    try:
+        browser.open(folder / "report.html")
+        browser.settle(1.5)
+        shown = browser.evaluate("[...document.querySelectorAll('[data-key]')].map(e => [e.dataset.key, e.dataset.scale, e.textContent])")
+        box = browser.evaluate("(() => { const r = document.querySelector('#viewer .gl-container canvas').getBoundingClientRect();"
+                               " return {x: r.x + scrollX, y: r.y + scrollY, width: r.width, height: r.height}; })()")
+        shot = np.asarray(Image.open(io.BytesIO(browser.screenshot(clip=box))).convert("RGB")).astype(int)
+        errors = browser.console_errors()
+        resources = browser.evaluate("performance.getEntriesByType('resource').map(e => e.name)")
+    finally:
+        browser.close()
+    assert errors == []
+    assert resources == []  # nothing fetched: everything is inline
+    keys = {k for k, _, _ in shown}
+    assert {"headgear_force_n", "custom.pressure_max_kpa", "generic.leak_l_min", "seated_along_mask_axis.custom.seated_gap_median_mm",
+            "cushion.min_wall_mm"} <= keys
+    shown_numbers_match(shown, fit)
+    skin = (np.abs(shot - [217, 192, 173]).max(axis=2) < 60).mean()  # the face, shaded
+    green = ((shot[..., 1] > shot[..., 0] + 30) & (shot[..., 1] > shot[..., 2])).mean()  # the custom cushion, in the window
+    assert skin > 0.1 and green > 0.005, (skin, green)
+
+
+def test_report_is_deterministic(designed, evaluated, report):
+    scan, d = designed
+    rims, _ = evaluated
+    _, files, fit = report
+    again = report_files(d, scan, fit, PROVENANCE, rims, WINDOW)
+    assert again.keys() == files.keys() and all(again[n] == files[n] for n in files)
+
+
+def test_input_hash_and_date(phantom1_dir, tmp_path, monkeypatch):
+    folder = tmp_path / "capture"
+    folder.mkdir()
+    for f in phantom1_dir.rglob("*"):
+        if f.is_file():
+            (folder / f.relative_to(phantom1_dir)).parent.mkdir(parents=True, exist_ok=True)
+            (folder / f.relative_to(phantom1_dir)).write_bytes(f.read_bytes())
+    assert input_sha256(folder) == input_sha256(phantom1_dir)
+    (folder / "intrinsics.json").write_text((folder / "intrinsics.json").read_text() + " ")
+    assert input_sha256(folder) != input_sha256(phantom1_dir)
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    assert run_date() == "2023-11-14 22:13 UTC"
