@@ -294,6 +294,9 @@ def main(argv: list[str] | None = None) -> int:
     except CpapfitError as exc:
         print(f"cpapfit: error: {exc}", file=sys.stderr)
         return EXIT_USER_ERROR
+    except OSError as exc:  # an output path that is a file, a full disk, no permission
+        print(f"cpapfit: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("cpapfit: interrupted", file=sys.stderr)
         return 130

@@ -47,8 +47,9 @@ def plug(grid: np.ndarray) -> trimesh.Trimesh:
     i = np.arange(n_u)
     rim = np.stack([i * n_v, ((i + 1) % n_u) * n_v, np.full(n_u, len(pts))], axis=1)
     ring = np.stack([((i + 1) % n_u) * n_v + n_v - 1, i * n_v + n_v - 1, np.full(n_u, len(pts) + 1)], axis=1)
-    mesh = trimesh.Trimesh(vertices, np.concatenate([sheet_faces(n_u, n_v), rim, ring]), process=False)
-    trimesh.repair.fix_normals(mesh)
+    mesh = trimesh.Trimesh(vertices, np.concatenate([sheet_faces(n_u, n_v), rim[:, ::-1], ring[:, ::-1]]), process=False)
+    if mesh.volume < 0:  # the fans are wound against the sheet along the shared rows: only the sign may be wrong
+        mesh.invert()
     return mesh
 
 

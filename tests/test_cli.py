@@ -152,3 +152,8 @@ def test_evaluate_refuses_bad_cushions_and_options_before_any_work(cli, tmp_path
     for args, word in cases:
         assert_one_line_error(*cli("evaluate", phantom1_dir, *args, "--out", out), word)
         assert not out.exists()
+
+
+def test_an_output_folder_that_is_a_file_is_one_line(cli, tmp_path):
+    (tmp_path / "taken").write_text("not a folder")
+    assert_one_line_error(*cli("phantom", "--seed", "1", "--out", tmp_path / "taken" / "sub"), "taken")

@@ -60,7 +60,8 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     names = {p.name for p in out.iterdir()}
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
                      "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
-                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png"}
+                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png",
+                     "rim_pressure.png", "rim_pressure_profile.png", "leak.png"}
     assert f"report: {out / 'report.html'}" in err
     curve = json.loads((out / "contact_curve.json").read_text())
     pts = np.array(curve["points"])

@@ -10,7 +10,7 @@ planar elliptic ring, the same for every patient, at a fixed clearance above the
 from dataclasses import dataclass
 
 import numpy as np
-from geomdl import NURBS
+from geomdl import NURBS, helpers
 from scipy.ndimage import gaussian_filter1d
 
 from ..contact import Contact, closed_resample
@@ -66,13 +66,24 @@ class Cushion:
         return surf
 
     def grid(self, n_u: int = 128, n_v: int = 24) -> np.ndarray:
-        """(n_u, n_v, 3) surface points: u around the seal (not repeating the start), v face to frame."""
+        """(n_u, n_v, 3) surface points: u around the seal (not repeating the start), v face to frame.
+        The surface is a tensor product with unit weights, so the grid is geomdl's basis functions
+        at the n_u and n_v parameters (a matrix each) applied to the control net."""
         surf = self.surface()
         lo, hi = surf.knotvector_u[DEGREE], surf.knotvector_u[-DEGREE - 1]
-        us = lo + (hi - lo) * np.arange(n_u) / n_u
-        vs = np.linspace(0.0, 1.0, n_v)
-        pts = surf.evaluate_list([(u, v) for u in us for v in vs])
-        return np.asarray(pts, dtype=np.float64).reshape(n_u, n_v, 3)
+        basis_u = _basis_matrix(surf.knotvector_u, surf.ctrlpts_size_u, lo + (hi - lo) * np.arange(n_u) / n_u)
+        basis_v = _basis_matrix(surf.knotvector_v, ROWS, np.linspace(0.0, 1.0, n_v))
+        net = np.asarray(surf.ctrlpts, dtype=np.float64).reshape(surf.ctrlpts_size_u, ROWS, 3)
+        return np.einsum("ui,ijc,vj->uvc", basis_u, net, basis_v)
+
+
+def _basis_matrix(knots: list, count: int, params: np.ndarray) -> np.ndarray:
+    """(P, count) values of the degree-DEGREE B-spline basis functions at each parameter (geomdl)."""
+    out = np.zeros((len(params), count))
+    for row, t in enumerate(params):
+        span = helpers.find_span_linear(DEGREE, knots, count, float(t))
+        out[row, span - DEGREE: span + 1] = helpers.basis_function(DEGREE, knots, span, float(t))
+    return out
 
 
 def periodic_interpolation(points: np.ndarray) -> np.ndarray:
