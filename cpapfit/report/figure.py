@@ -44,7 +44,7 @@ def zoned_cmap(lo_frac: float, hi_frac: float) -> Colormap:
 def png(fig: Figure) -> bytes:
     """PNG bytes of a figure (no timestamp or software metadata: same figure, same bytes)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
+    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None}, pil_kwargs={"compress_level": 3})
     return buf.getvalue()
 
 
