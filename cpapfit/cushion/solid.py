@@ -8,7 +8,7 @@ from scipy.spatial import cKDTree
 from ..contact import closed_resample
 from .nurbs import Cushion
 
-NORMAL_SMOOTHING = 1.5  # Gaussian over the sheet's normals before offsetting, in grid steps
+NORMAL_SMOOTHING = 3.0  # Gaussian over the sheet's normals before offsetting, in grid steps
 
 
 def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray) -> trimesh.Trimesh:
