@@ -18,6 +18,7 @@ from .io.phantom import write_phantom
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .phantom import make_phantom
 from .progress import stage_display
+from .quality import assess_design
 from .pipeline import NOT_BUILT_PARTS, Alignment, Design, align, design, missing_stages, register_template, stage_table
 from .report.pictures import residual_picture, template_regions_picture
 from .scan import Scan
@@ -98,6 +99,8 @@ def cmd_design(args) -> int:
         on_stage("writing files")
         written = write_files(Path(args.out), design_files(d, scan))
     info(f"{scan.units_note}; {design_summary(d)}; {len(written)} files in {args.out}")
+    for flag in assess_design(d, scan).flags:
+        info(f"rescan advised: {flag.message}")
     info(f"not built yet: {', '.join(NOT_BUILT_PARTS)}")
     return 0
 
@@ -230,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except CpapfitError as exc:
-        print(f"cpapfit: error: {exc}", file=sys.stderr)
+        print(f"cpapfit: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line, whatever the message
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("cpapfit: interrupted", file=sys.stderr)

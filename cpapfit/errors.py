@@ -18,3 +18,7 @@ class UnitsError(CpapfitError):
 
 class NotAvailableError(CpapfitError):
     """A command whose stage is not built yet."""
+
+
+class QualityError(CpapfitError):
+    """The scan is not good enough for a mask (a quality gate refuses): rescan."""

@@ -13,6 +13,7 @@ from .cushion.generic import place, template_cushion
 from .evaluate.gap import RimGap, rim_gap, seat
 from .export import check_solid, check_closed
 from .mould import mould
+from .quality import assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
@@ -101,6 +102,7 @@ def design(
     reg = register_template(scan, al)
     on_stage("contact")
     contact = transfer_contact(template, reg.vertices, scan, mask)
+    require_quality(assess(scan, al.landmarks, reg, contact))  # or refuse: rescan
     on_stage("cushion")
     axis, up = al.similarity.rotation[:, 2], al.similarity.rotation[:, 1]
     cushion = design_cushion(contact, axis, up, reg.vertices[4], params)

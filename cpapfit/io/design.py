@@ -6,6 +6,7 @@ from .. import __version__
 from ..align.nonrigid import Registration
 from ..export import stl_bytes, threemf_bytes
 from ..pipeline import NOT_BUILT_PARTS, Design
+from ..quality import assess_design
 from ..scan import Scan
 from ..template import load_template
 from .write import json_bytes, ply_bytes
@@ -32,6 +33,7 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     fit = {
         "cpapfit_version": __version__, "units": "mm", "source": scan.source, "scan_units": scan.units,
         "mask": d.contact.mask,
+        **assess_design(d, scan).record(),  # rescan_advised, warnings, quality
         "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points)},
         "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
                          "residual_median_mm": float(np.median(reg.residual[reg.valid]))},
