@@ -41,7 +41,7 @@ class QualityParams:
     coverage_*: fraction of the seal band with scan data (bad below).
     hole_*_mm: longest stretch of the seal over a hole, mm along the seal (bad above).
     residual_*_mm: median registration residual over the seal band, mm (bad above).
-    landmarks_*_mm: median distance of the landmarks from the scan, mm (bad above).
+    landmarks_*_mm: median distance of the landmarks from the scanned skin, mm (bad above).
     Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
     flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin.
     """
@@ -50,7 +50,7 @@ class QualityParams:
     coverage_flag: float = 0.75
     coverage_refuse: float = 0.4
     hole_flag_mm: float = 30.0
-    hole_refuse_mm: float = 70.0
+    hole_refuse_mm: float = 100.0
     residual_flag_mm: float = 0.5
     residual_refuse_mm: float = 1.5
     landmarks_flag_mm: float = 1.0
@@ -109,6 +109,14 @@ def spacing(tree: cKDTree, sample: int = 2000) -> float:
     return float(np.median(tree.query(points, k=2)[0][:, 1]))
 
 
+def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:
+    """(K,) distance (mm) of points from the scan: to the tangent plane at the nearest scan point
+    when that is within `reach` (a coarse mesh's vertices are far apart), else to the point."""
+    dist, idx = tree.query(points)
+    plane = np.abs(np.einsum("ij,ij->i", points - scan.vertices[idx], scan.normals[idx]))
+    return np.where(dist <= reach, plane, dist)
+
+
 def longest_run(bad: np.ndarray) -> int:
     """Length of the longest run of True in a closed (K,) bool loop."""
     if bad.all():
@@ -141,7 +149,7 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
               "a noisy scan, or one that moved: rescan holding still"),
     ]
     if landmarks.path != "fallback":
-        off = float(np.median(tree.query(landmarks.points)[0]))
+        off = float(np.median(off_skin(scan, tree, landmarks.points, reach)))
         gates.append(_gate("landmarks_mm", off, (p.landmarks_flag_mm, p.landmarks_refuse_mm),
                            f"the {landmarks.path} landmarks lie a median {off:.1f} mm off the scanned skin",
                            "they disagree with the geometry: check the landmarks file, or rescan"))
