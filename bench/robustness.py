@@ -62,7 +62,7 @@ def run(ph, scale: float, sigma: float, seed: int) -> dict:
     try:
         d = design(scan, "nasal", noisy_landmarks(scan, sigma, seed) if sigma else None)
     except CpapfitError as exc:
-        return {"outcome": "refused", "reason": type(exc).__name__ + ": " + str(exc)[:70]}
+        return {"outcome": "refused", "reason": f"{type(exc).__name__}: {str(exc).split(':')[0][:60]}", "message": str(exc)}
     err = float(np.linalg.norm(d.registration.vertices[REGION] - scale * ph.surface[REGION], axis=1).mean())
     flags = [g.code for g in assess_design(d, scan).flags]
     return {"outcome": "made", "err": err, "flags": flags}

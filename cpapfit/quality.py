@@ -23,13 +23,12 @@ from scipy.spatial import cKDTree
 
 from .align.nonrigid import Registration
 from .contact import Contact
-from .landmarks.types import Landmarks
 from .errors import QualityError
+from .landmarks.types import Landmarks
 from .scan import Scan
 from .template import load_template
 
-
-SPACINGS = 1.5
+SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
 
 
 @dataclass(frozen=True)
@@ -70,6 +69,8 @@ class Gate:
 
 @dataclass(frozen=True)
 class Quality:
+    """Every gate's result for one design."""
+
     gates: tuple[Gate, ...]
 
     @property
@@ -164,5 +165,6 @@ def assess_design(design, scan: Scan, params: QualityParams = QualityParams()) -
 def require_quality(quality: Quality) -> Quality:
     """The quality, or a QualityError naming the first gate that refuses."""
     if quality.refused:
-        raise QualityError(f"the scan is not good enough for a mask: {quality.refused[0].message}")
+        gate = quality.refused[0]
+        raise QualityError(f"the scan is not good enough for a mask ({gate.code}): {gate.message}")
     return quality

@@ -74,13 +74,13 @@ def write(folder: Path, name: str, data: bytes) -> Path:
     return path
 
 
-@fuzz(500)
+@fuzz(400)
 @given(fmt=st.sampled_from(FORMATS), data=st.binary(max_size=3000))
 def test_random_bytes_with_a_mesh_extension(folder, fmt, data):
     loads_or_refuses(load_scan, write(folder, f"random.{fmt}", data))
 
 
-@fuzz(1000)
+@fuzz(700)
 @given(name=st.sampled_from(sorted(VALID)), cut=st.one_of(st.just(1.0), st.floats(0, 1)), changes=edits)
 def test_mutated_mesh_files(folder, name, cut, changes):
     suffix = name.rsplit(".", 1)[-1]
@@ -90,7 +90,7 @@ def test_mutated_mesh_files(folder, name, cut, changes):
 numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**6, 10**6), st.text(max_size=3), st.none())
 
 
-@fuzz(300)
+@fuzz(250)
 @given(
     meta=st.fixed_dictionaries({
         "width": st.one_of(st.just(64), numbers), "height": st.one_of(st.just(48), numbers),
@@ -126,14 +126,14 @@ landmark_like = st.fixed_dictionaries({
 })
 
 
-@fuzz(800)
+@fuzz(500)
 @given(content=st.one_of(json_values, landmark_like), units=st.sampled_from(["mm", "cm", "m"]))
 def test_generated_landmark_files(folder, content, units):
     text = json.dumps(content)  # Python's JSON: NaN and Infinity included, as some writers emit them
     loads_or_refuses(read_landmarks, write(folder, "landmarks.json", text.encode()), units, N_TEMPLATE)
 
 
-@fuzz(400)
+@fuzz(300)
 @given(cut=st.floats(0, 1), changes=edits)
 def test_mutated_landmark_files(folder, cut, changes):
     valid = json.dumps({"points": canonical_face()[0][:20].tolist(), "template_index": list(range(20))}).encode()
