@@ -119,6 +119,8 @@ def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
         run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage)
     info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
+    for warning in run.fit.get("warnings", []):
+        info(f"rescan advised: {warning['message']}")
     info(report_summary(Path(args.out), run.fit))
     return 0
 
@@ -292,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except CpapfitError as exc:
-        print(f"cpapfit: error: {exc}", file=sys.stderr)
+        print(f"cpapfit: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line, whatever the message
         return EXIT_USER_ERROR
     except OSError as exc:  # an output path that is a file, a full disk, no permission
         print(f"cpapfit: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)

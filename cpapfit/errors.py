@@ -15,3 +15,6 @@ class InputError(CpapfitError):
 class UnitsError(CpapfitError):
     """The scan's size fits no supported unit, or the stated unit is implausible."""
 
+
+class QualityError(CpapfitError):
+    """The scan is not good enough for a mask (a quality gate refuses): rescan."""

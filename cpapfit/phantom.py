@@ -7,7 +7,7 @@ the subject's surface in the template's vertex order, in the camera frame (mm), 
 position of every template vertex (landmarks, contact regions) is known.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from matplotlib.path import Path as Polygon
@@ -74,14 +74,15 @@ class Phantom:
         return self.surface[:N_LANDMARKS]
 
 
-def make_phantom(seed: int, sensor: SensorModel = SensorModel()) -> Phantom:
-    """The synthetic subject of `seed`: same seed, same arrays, bit for bit."""
+def make_phantom(seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None) -> Phantom:
+    """The synthetic subject of `seed`: same seed, same arrays, bit for bit. `yaw_deg` turns the
+    head by that yaw instead of the random one (everything else as for the seed)."""
     rng = np.random.default_rng(seed)
     template = load_template()
     identity = random_identity(rng)
     face = apply_identity(template, identity)
     intrinsics = random_intrinsics(rng)
-    surface, pose = place_in_view(face, template, intrinsics, rng)
+    surface, pose = place_in_view(face, template, intrinsics, rng, yaw_deg)
     hits = raycast(surface, template.faces, intrinsics)
     image = colour_image(hits, surface, template, rng)
     depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
@@ -132,11 +133,13 @@ def random_intrinsics(rng: np.random.Generator) -> Intrinsics:
     return Intrinsics(640, 480, f, f, float(319.5 + rng.uniform(-6, 6)), float(239.5 + rng.uniform(-6, 6)))
 
 
-def place_in_view(face: np.ndarray, template: Template, intr: Intrinsics, rng: np.random.Generator):
-    """Pose the face (yaw/pitch +-25 deg, roll +-15 deg) at 350-700 mm, wholly inside the image.
+def place_in_view(face: np.ndarray, template: Template, intr: Intrinsics, rng: np.random.Generator, yaw_deg: float | None = None):
+    """Pose the face (yaw/pitch +-25 deg, roll +-15 deg; yaw `yaw_deg` if given) at 350-700 mm,
+    wholly inside the image.
 
     Returns (surface (N, 3) mm camera frame, pose dict)."""
     yaw, pitch, roll = rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(-15, 15)
+    yaw = yaw if yaw_deg is None else yaw_deg  # drawn all the same: the rest of the subject is the seed's
     head = Rotation.from_euler("yxz", [yaw, pitch, roll], degrees=True).as_matrix()
     rotation = TEMPLATE_TO_CAMERA @ head
     distance = float(rng.uniform(350.0, 700.0))
@@ -224,3 +227,20 @@ def random_holes(on_face: np.ndarray, mean_count: float, rng: np.random.Generato
         b = -du * np.sin(theta) + dv * np.cos(theta)
         holes |= (a / ru) ** 2 + (b / rv) ** 2 <= 1.0
     return holes
+
+
+def with_holes(ph: Phantom, region: np.ndarray, fraction: float, seed: int = 0, radius_px: tuple[float, float] = (4.0, 12.0)) -> Phantom:
+    """The phantom with round depth holes (random radii in `radius_px`) centred on the region of
+    template vertex indices `region`, added until at least `fraction` of the region's valid depth
+    pixels are gone (a scan with holes over the mask). Colour and truth are unchanged."""
+    hits = raycast(ph.surface, ph.faces, ph.intrinsics)
+    in_region = np.isin(ph.faces, region).any(axis=1)
+    pixels = hits.hit & in_region[np.where(hits.hit, hits.triangle, 0)] & (ph.depth_raw > 0)
+    rows, cols = np.nonzero(pixels)
+    rng = np.random.default_rng(seed)
+    vv, uu = np.mgrid[: pixels.shape[0], : pixels.shape[1]]
+    holes = np.zeros(pixels.shape, dtype=bool)
+    while (holes & pixels).sum() < fraction * pixels.sum():
+        k = rng.integers(len(rows))
+        holes |= (uu - cols[k]) ** 2 + (vv - rows[k]) ** 2 <= rng.uniform(*radius_px) ** 2
+    return replace(ph, depth_raw=np.where(holes, 0, ph.depth_raw).astype(np.uint16))

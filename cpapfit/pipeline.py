@@ -19,6 +19,7 @@ from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
 from .export import check_closed, check_solid
 from .mould import mould
+from .quality import assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan
@@ -112,6 +113,7 @@ def design(
     reg = register_template(scan, al)
     on_stage("contact")
     contact = transfer_contact(load_template(), reg.vertices, scan, mask)
+    require_quality(assess(scan, al.landmarks, reg, contact))  # or refuse: rescan
     on_stage("cushion")
     face = face_for(scan, al, reg)
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)

@@ -65,7 +65,7 @@ def read_intrinsics(path: Path) -> tuple[Intrinsics, float]:
         w, h = int(data["width"]), int(data["height"])
         k = np.asarray(data["intrinsic_matrix"], dtype=np.float64).reshape(3, 3).T  # column-major
         depth_scale = float(data.get("depth_scale", 1000.0))
-    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError, RecursionError, OverflowError) as exc:
         raise InputError(
             f"{path}: not Open3D intrinsics ({type(exc).__name__}: {exc}); expected width, height, "
             "intrinsic_matrix (9 numbers, column-major) and optional depth_scale"

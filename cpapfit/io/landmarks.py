@@ -22,7 +22,7 @@ def read_landmarks(path: Path, units: str, n_template: int) -> Landmarks:
         data = json.loads(path.read_text())
         points = np.asarray(data["points"], dtype=np.float64)
         raw_index = np.asarray(data["template_index"])
-    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"{path}: not a landmarks file ({type(exc).__name__}: {exc}); expected "
                          '{"points": [[x, y, z], ...], "template_index": [i, ...]}') from None
     if points.ndim != 2 or points.shape[1] != 3 or len(points) != raw_index.size:

@@ -8,6 +8,8 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..scan import Scan
+from .limits import check_complete, check_declared_size, check_size
+from .surface import check_surface
 from .units import MM_PER_UNIT, decide_units
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
@@ -18,13 +20,11 @@ NORMAL_NEIGHBOURS = 16
 def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     """Read a mesh or point-cloud file into a `Scan` in millimetres (the file's own frame)."""
     geom = read_geometry(path)
-    vertices = np.asarray(geom.vertices, dtype=np.float64)
-    faces = np.asarray(getattr(geom, "faces", np.zeros((0, 3))), dtype=np.int64).reshape(-1, 3)
+    vertices, faces, (colors, texture, uv) = _arrays(path, geom)
     _check(path, vertices, faces)
     unit, note = decide_units(vertices, units)
     vertices = vertices * MM_PER_UNIT[unit]
     normals = _mesh_normals(vertices, faces) if len(faces) else _cloud_normals(vertices)
-    colors, texture, uv = _appearance(geom, len(vertices))
     return Scan(
         vertices=vertices, faces=faces, normals=normals, source=str(path), units=unit, units_note=note,
         colors=colors, texture=texture, uv=uv,
@@ -42,13 +42,23 @@ def read_geometry(path: Path):
         raise InputError(f"{path}: not a mesh file ({', '.join(MESH_SUFFIXES)}) nor an RGB-D capture folder")
     if path.suffix.lower() == ".obj":
         _check_obj_tail(path)
+    declared = check_declared_size(path)
     try:
-        loaded = trimesh.load(path, process=False)
+        loaded = _parse(path)
+    except InputError:
+        raise
     except Exception as exc:  # any parser failure on a user's file is a bad file
         raise InputError(
             f"{path}: not a readable {path.suffix.lstrip('.').upper()} mesh ({type(exc).__name__}: {exc}); "
             "is the file complete and of that format?"
         ) from None
+    check_complete(path, declared, len(loaded.vertices), len(getattr(loaded, "faces", ())))
+    return loaded
+
+
+def _parse(path: Path):
+    """trimesh's reading of a file as one geometry: a scene's meshes joined, an STL's corners merged."""
+    loaded = trimesh.load(path, process=False)
     if isinstance(loaded, trimesh.Scene):
         geoms = [g for g in loaded.dump() if hasattr(g, "vertices")] if loaded.geometry else []
         if not geoms:
@@ -77,24 +87,43 @@ def _named_files(path: Path, keywords: tuple[str, ...]) -> list[Path]:
     return [path.parent / n for n in dict.fromkeys(names) if (path.parent / n).is_file()]
 
 
+def _arrays(path: Path, geom):
+    """(vertices (N, 3) float64, faces (M, 3) int64, (colors, texture, uv)) of a parsed file, or an
+    InputError: trimesh builds some of these lazily, so a malformed file may fail only here."""
+    try:
+        vertices = np.asarray(geom.vertices, dtype=np.float64)
+        faces = np.asarray(getattr(geom, "faces", np.zeros((0, 3))), dtype=np.int64)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or (faces.size and (faces.ndim != 2 or faces.shape[1] != 3)):
+            raise ValueError(f"vertices {vertices.shape}, faces {faces.shape}")
+        return vertices, faces.reshape(-1, 3), _appearance(geom, len(vertices))
+    except Exception as exc:  # any failure to read a user's file is a bad file
+        raise InputError(f"{path}: a malformed {path.suffix.lstrip('.').upper()} file ({type(exc).__name__}: {exc}); re-export the scan") from None
+
+
 # OBJ statements and the fewest fields each needs; an OBJ (no counts in a header) cut short
 # usually ends in the middle of one.
 OBJ_FIELDS = {"v": 3, "vt": 2, "vn": 3, "f": 3, "l": 2}
 
 
 def _check_obj_tail(path: Path) -> None:
-    """Refuse an OBJ whose last statement is incomplete (a truncated upload)."""
+    """Refuse an OBJ whose last statement is incomplete or lacks its end of line (a truncated upload)."""
     with open(path, "rb") as fh:
         fh.seek(max(0, path.stat().st_size - 4096))
-        lines = fh.read().decode("latin-1").strip().splitlines()
+        tail = fh.read()
+    lines = tail.decode("latin-1").strip().splitlines()
     fields = lines[-1].split() if lines else []
-    need = OBJ_FIELDS.get(fields[0], 0) if fields else 0
-    if len(fields) - 1 < need or (fields[0] == "f" and fields[-1].endswith("/")):
+    if not fields:
+        return
+    need = OBJ_FIELDS.get(fields[0], 0)
+    unended = need and not tail.endswith((b"\n", b"\r"))
+    if len(fields) - 1 < need or (fields[0] == "f" and fields[-1].endswith("/")) or unended:
         raise InputError(f"{path}: the last line '{lines[-1][:40]}' is cut short; the file is truncated")
 
 
 def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    """Refuse meshes no stage can use: too few points, NaN/Inf, faces pointing nowhere."""
+    """Refuse meshes no stage can use: too few or too many points, NaN/Inf, faces pointing nowhere,
+    triangles that are no surface."""
+    check_size(path, len(vertices), len(faces))
     if len(vertices) < MIN_VERTICES:
         raise InputError(f"{path}: only {len(vertices)} vertices; a face scan has thousands (is the file truncated?)")
     if not np.isfinite(vertices).all():
@@ -102,6 +131,8 @@ def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
         raise InputError(f"{path}: {bad} vertices are NaN or infinite; repair or re-export the scan")
     if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
         raise InputError(f"{path}: triangles refer to vertices that do not exist; the file is corrupt")
+    if len(faces):
+        check_surface(path, vertices, faces)
 
 
 def _mesh_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

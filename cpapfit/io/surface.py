@@ -1,0 +1,45 @@
+"""Is a mesh a surface? Triangle soups, non-manifold tangles and degenerate meshes are refused.
+
+A scan is a surface: most of its edges join exactly two triangles (the rest are its rim and the
+rims of holes), few or none join more, and its triangles have area. A file that parses but is
+none of these (random triangles, fins, every corner stored separately, all points on a line)
+would otherwise be searched for a face for a long time and refused with a misleading reason.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+MIN_SHARED_EDGES = 0.5  # fraction of edges joining exactly two triangles
+MAX_NONMANIFOLD_EDGES = 0.05  # fraction of edges joining three or more
+MAX_DEGENERATE = 0.5  # fraction of triangles with no area
+DEGENERATE_AREA = 1e-12  # a triangle's area below this x the scan's extent squared is none
+
+
+def edge_use(faces: np.ndarray) -> np.ndarray:
+    """(E,) how many triangles use each distinct edge of (M, 3) faces."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    key = edges[:, 0] * (int(faces.max()) + 1) + edges[:, 1]
+    return np.unique(key, return_counts=True)[1]
+
+
+def check_surface(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    """Refuse (InputError) triangles of (N, 3) vertices that do not form a surface."""
+    corners = vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    degenerate = float((area <= DEGENERATE_AREA * np.ptp(vertices, axis=0).max() ** 2).mean())
+    if degenerate > MAX_DEGENERATE:
+        raise InputError(f"{path}: {100 * degenerate:.0f} % of the triangles have no area (a degenerate mesh); re-export the scan")
+    use = edge_use(faces)
+    if (use > 2).mean() > MAX_NONMANIFOLD_EDGES:
+        raise InputError(
+            f"{path}: {100 * (use > 2).mean():.0f} % of the edges join three or more triangles (non-manifold); "
+            "this is not a single surface: repair the scan (e.g. remove duplicated or overlapping parts)"
+        )
+    if (use == 2).mean() < MIN_SHARED_EDGES:
+        raise InputError(
+            f"{path}: only {100 * (use == 2).mean():.0f} % of the edges join two triangles: the triangles do not form a "
+            "surface (random triangles, or every triangle with its own corners: merge duplicate vertices)"
+        )

@@ -1,0 +1,170 @@
+"""Quality gates: is the scan good enough for the mask designed on it?
+
+Measured once the template is registered and the seal carried over (all mm):
+- coverage: fraction of the mask's contact band (registered template vertices) with scan data
+  within `near_mm`: a scan cropped, turned away, or with the nose's shadow over the seal;
+- hole: the longest stretch of the seal curve with no scan data within `near_mm`, in mm along
+  the seal: there the seal follows the template, not the patient;
+- residual: median point-to-plane distance of the contact band's matched vertices to the scan:
+  a noisy or moving scan, or a registration that did not reach the skin;
+- landmarks: median distance from the landmarks to the scanned skin. Detected landmarks are
+  lifted from the depth, so they lie on it; landmarks off it (another session's coordinates, a
+  wrong frame, a careless file) drag the registration, and the mask, along the skin where
+  nothing in the geometry can pull it back. Landmark-free alignments (fallback) are not judged.
+
+Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
+threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .align.nonrigid import Registration
+from .contact import Contact
+from .errors import QualityError
+from .landmarks.types import Landmarks
+from .scan import Scan
+from .template import load_template
+
+SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
+
+
+@dataclass(frozen=True)
+class QualityParams:
+    """Thresholds of the gates. Past *_flag: "rescan advised" (fit.json, report); past *_refuse: no design.
+
+    near_mm: scan data this close (mm) counts as present (coverage, hole); for a coarse scan,
+        SPACINGS times its point spacing if that is more (a point between vertices is that far from one).
+    coverage_*: fraction of the seal band with scan data (bad below).
+    hole_*_mm: longest stretch of the seal over a hole, mm along the seal (bad above).
+    residual_*_mm: median registration residual over the seal band, mm (bad above).
+    landmarks_*_mm: median distance of the landmarks from the scanned skin, mm (bad above).
+    Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
+    flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin.
+    """
+
+    near_mm: float = 2.0
+    coverage_flag: float = 0.75
+    coverage_refuse: float = 0.4
+    hole_flag_mm: float = 30.0
+    hole_refuse_mm: float = 100.0
+    residual_flag_mm: float = 0.5
+    residual_refuse_mm: float = 1.5
+    landmarks_flag_mm: float = 1.0
+    landmarks_refuse_mm: float = 5.0
+
+
+@dataclass(frozen=True)
+class Gate:
+    """One measure and what it means: `flag` (rescan advised), `refuse` (no design), a one-line message."""
+
+    code: str
+    value: float
+    flag: bool
+    refuse: bool
+    message: str
+
+
+@dataclass(frozen=True)
+class Quality:
+    """Every gate's result for one design."""
+
+    gates: tuple[Gate, ...]
+
+    @property
+    def flags(self) -> list[Gate]:
+        return [g for g in self.gates if g.flag]
+
+    @property
+    def refused(self) -> list[Gate]:
+        return [g for g in self.gates if g.refuse]
+
+    def record(self) -> dict:
+        """The fit.json keys: rescan_advised, warnings (code and message) and every measured value."""
+        return {
+            "rescan_advised": bool(self.flags),
+            "warnings": [{"code": g.code, "message": g.message} for g in self.flags],
+            "quality": {g.code: round(g.value, 4) for g in self.gates},
+        }
+
+
+def _gate(code: str, value: float, limits: tuple[float, float], what: str, advice: str, unit: str = " mm") -> Gate:
+    """A gate on `value`, bad above its (flag, refuse) `limits`, or below them if flag > refuse;
+    `what` says the value in words, `advice` what to do."""
+    flag_at, refuse_at = limits
+    low_is_bad = flag_at > refuse_at
+    side = "below" if low_is_bad else "above"
+    worse = (lambda a, b: a < b) if low_is_bad else (lambda a, b: a > b)
+    scale = 100.0 if unit == " %" else 1.0
+    return Gate(
+        code, float(value), worse(value, flag_at), worse(value, refuse_at),
+        f"{what}; {advice} (rescan advised {side} {scale * flag_at:g}{unit}, refused {side} {scale * refuse_at:g}{unit})",
+    )
+
+
+def spacing(tree: cKDTree, sample: int = 2000) -> float:
+    """Median distance (mm) from a scan point to its nearest neighbour (a deterministic sample)."""
+    points = tree.data[:: max(1, len(tree.data) // sample)]
+    return float(np.median(tree.query(points, k=2)[0][:, 1]))
+
+
+def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:
+    """(K,) distance (mm) of points from the scan: to the tangent plane at the nearest scan point
+    when that is within `reach` (a coarse mesh's vertices are far apart), else to the point."""
+    dist, idx = tree.query(points)
+    plane = np.abs(np.einsum("ij,ij->i", points - scan.vertices[idx], scan.normals[idx]))
+    return np.where(dist <= reach, plane, dist)
+
+
+def longest_run(bad: np.ndarray) -> int:
+    """Length of the longest run of True in a closed (K,) bool loop."""
+    if bad.all():
+        return len(bad)
+    start = int(np.argmin(bad))  # a False: no run wraps past it
+    runs = np.diff(np.flatnonzero(np.concatenate([[True], ~np.roll(bad, -start), [True]]))) - 1
+    return int(runs.max())
+
+
+def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact: Contact,
+           params: QualityParams = QualityParams()) -> Quality:
+    """The gates for the landmarks, the registration and the seal it carried onto `scan`."""
+    p, mask = params, contact.mask
+    tree = cKDTree(scan.vertices)
+    reach = max(p.near_mm, SPACINGS * spacing(tree))
+    band = load_template().regions[mask].band
+    near = float((tree.query(registration.vertices[band], distance_upper_bound=reach)[0] < reach).mean())
+    seal_gap = tree.query(contact.curve, distance_upper_bound=reach)[0] >= reach
+    seal_mm = float(np.linalg.norm(contact.curve - np.roll(contact.curve, 1, axis=0), axis=1).sum())
+    hole = longest_run(seal_gap) * seal_mm / len(seal_gap)
+    matched = registration.residual[band][registration.valid[band]]
+    residual = float(np.median(matched)) if len(matched) else np.inf
+    gates = [
+        _gate("coverage", near, (p.coverage_flag, p.coverage_refuse), f"the scan covers {100 * near:.0f} % of the {mask} mask's seal region",
+              "rescan with the whole mask region (nose, cheeks, lips) in view, facing the camera", " %"),
+        _gate("hole_mm", hole, (p.hole_flag_mm, p.hole_refuse_mm), f"{hole:.0f} mm of the {mask} seal lies over a hole in the scan",
+              "the seal there is the template's guess: rescan to fill the hole"),
+        _gate("residual_mm", residual, (p.residual_flag_mm, p.residual_refuse_mm),
+              f"the registered face lies a median {residual:.2f} mm from the scan over the seal",
+              "a noisy scan, or one that moved: rescan holding still"),
+    ]
+    if landmarks.path != "fallback":
+        off = float(np.median(off_skin(scan, tree, landmarks.points, reach)))
+        gates.append(_gate("landmarks_mm", off, (p.landmarks_flag_mm, p.landmarks_refuse_mm),
+                           f"the {landmarks.path} landmarks lie a median {off:.1f} mm off the scanned skin",
+                           "they disagree with the geometry: check the landmarks file, or rescan"))
+    return Quality(tuple(gates))
+
+
+def assess_design(design, scan: Scan, params: QualityParams = QualityParams()) -> Quality:
+    """The gates of a pipeline `Design` made from `scan`."""
+    return assess(scan, design.alignment.landmarks, design.registration, design.contact, params)
+
+
+def require_quality(quality: Quality) -> Quality:
+    """The quality, or a QualityError naming the first gate that refuses."""
+    if quality.refused:
+        gate = quality.refused[0]
+        raise QualityError(f"the scan is not good enough for a mask ({gate.code}): {gate.message}")
+    return quality

@@ -1,0 +1,114 @@
+"""Quality gates on synthetic subjects made to trip them, and the design run twice: the same bytes,
+and no network (sockets blocked)."""
+
+import contextlib
+import io
+import json
+import socket
+
+import numpy as np
+import pytest
+
+from cpapfit.cli import main
+from cpapfit.io.capture import capture_files
+from cpapfit.io.write import write_files
+from cpapfit.phantom import SensorModel, make_phantom, with_holes
+from cpapfit.quality import QualityParams, longest_run
+from cpapfit.template import load_template
+
+GATES = QualityParams()
+
+
+def run_design(*argv) -> tuple[int, str]:
+    """`cpapfit design` in-process: (exit code, stderr)."""
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["design", *map(str, argv), "--quiet"])
+    return code, err.getvalue()
+
+
+@contextlib.contextmanager
+def no_network(attempts: list):
+    """Every way to open a socket raises, and is recorded in `attempts`."""
+
+    def refuse(*args, **kwargs):
+        attempts.append(args)
+        raise OSError("network use during a cpapfit run")
+
+    with pytest.MonkeyPatch.context() as mp:
+        for name in ("socket", "create_connection", "getaddrinfo", "socketpair"):
+            mp.setattr(socket, name, refuse)
+        yield
+
+
+@pytest.fixture(scope="module")
+def twice(phantom1_dir, tmp_path_factory):
+    """Seed 1 designed twice: normally, then with the network blocked. {"plain"|"offline": (code, stderr, folder)}, attempts."""
+    runs, attempts = {}, []
+    for name in ("plain", "offline"):
+        out = tmp_path_factory.mktemp(name)
+        with no_network(attempts) if name == "offline" else contextlib.nullcontext():
+            runs[name] = (*run_design(phantom1_dir, "--out", out), out)
+    return runs, attempts
+
+
+def test_the_same_input_gives_the_same_bytes(twice):
+    runs, _ = twice
+    files = {name: {p.name: p.read_bytes() for p in sorted(out.iterdir())} for name, (_, _, out) in runs.items()}
+    assert len(files["plain"]) >= 8 and files["plain"].keys() == files["offline"].keys()
+    for name, data in files["plain"].items():
+        assert data == files["offline"][name], name
+
+
+def test_a_design_needs_no_network(twice):
+    runs, attempts = twice
+    code, err, out = runs["offline"]
+    assert code == 0, err
+    assert attempts == []
+    assert (out / "cushion.stl").stat().st_size > 0
+
+
+def test_a_clean_subject_trips_no_gate(twice):
+    code, err, out = twice[0]["plain"]
+    fit = json.loads((out / "fit.json").read_text())
+    assert code == 0 and fit["rescan_advised"] is False and fit["warnings"] == []
+    q = fit["quality"]
+    assert q["coverage"] > GATES.coverage_flag and q["hole_mm"] < GATES.hole_flag_mm
+    assert q["residual_mm"] < GATES.residual_flag_mm and q["landmarks_mm"] < GATES.landmarks_flag_mm
+    assert "rescan advised" not in err
+
+
+def design_flags(tmp_path, ph, *extra) -> tuple[list[str], str]:
+    """Design a subject's capture; the codes of the gates it flags, and stderr."""
+    write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out", *extra)
+    assert code == 0, err
+    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert fit["rescan_advised"] is True and "rescan advised" in err
+    return [w["code"] for w in fit["warnings"]], err
+
+
+def test_holes_under_the_seal_are_flagged(tmp_path, phantom1):
+    curve = load_template().regions["nasal"].curve
+    codes, err = design_flags(tmp_path, with_holes(phantom1, curve, 0.5, radius_px=(10.0, 14.0)), "--mask", "nasal")
+    assert "hole_mm" in codes, err
+
+
+def test_a_noisy_scan_is_flagged(tmp_path):
+    codes, err = design_flags(tmp_path, make_phantom(1, SensorModel(noise_mm_at_500=3.0)))
+    assert "residual_mm" in codes, err
+
+
+def test_landmarks_off_the_skin_are_flagged(tmp_path, phantom1):
+    """The true landmarks, 1.5 mm in front of the skin (a file from another session)."""
+    idx = np.arange(0, 468, 3)
+    off = phantom1.landmarks[idx] - [0.0, 0.0, 1.5]  # towards the camera
+    (tmp_path / "lm.json").write_text(json.dumps({"points": off.tolist(), "template_index": idx.tolist()}))
+    codes, err = design_flags(tmp_path, phantom1, "--landmarks", tmp_path / "lm.json")
+    assert codes == ["landmarks_mm"], err
+
+
+def test_longest_hole_wraps_around_the_seal():
+    bad = np.array([1, 1, 0, 0, 1, 0, 1, 1, 1], dtype=bool)
+    assert longest_run(bad) == 5 and longest_run(~bad) == 2
+    assert longest_run(np.ones(4, bool)) == 4 and longest_run(np.zeros(4, bool)) == 0
