@@ -6,18 +6,19 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
 from ..contact import closed_resample
+from ..export import self_intersecting_edges
 from .nurbs import Cushion
 
-NORMAL_SMOOTHING = 3.0  # Gaussian over the sheet's normals before offsetting, in grid steps
+NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
 
 
-def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray) -> trimesh.Trimesh:
+def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray, smoothing: float = NORMAL_SMOOTHING[0]) -> trimesh.Trimesh:
     """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` to the
     side away from the face (`face_normals_hint`: (n_u, 3) skin normals along the v=0 edge)."""
     n_u, n_v, _ = grid.shape
     sheet = trimesh.Trimesh(grid.reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
     normals = np.array(sheet.vertex_normals).reshape(n_u, n_v, 3)
-    normals = gaussian_filter(normals, (NORMAL_SMOOTHING, NORMAL_SMOOTHING, 0), mode=("wrap", "nearest", "nearest"))
+    normals = gaussian_filter(normals, (smoothing, smoothing, 0), mode=("wrap", "nearest", "nearest"))
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)  # smoothed: the offset does not fold in tight bends
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
@@ -65,17 +66,21 @@ def cushion_sheet(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Tr
 def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 24) -> tuple[trimesh.Trimesh, float]:
     """(the printable cushion, its thinnest wall in mm). The NURBS surface is sampled and thickened
     away from the face; where the wall bends, an offset thins it on the inside of the bend, so
-    the offset grows (at most twice) until the thinnest wall reaches the set thickness."""
+    the offset grows (at most twice) until the thinnest wall reaches the set thickness; where the
+    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
     grid = cushion.grid(n_u, n_v)
     hint = closed_resample(skin_normals, n_u)
     target = cushion.params.wall_mm
-    offset = target
-    for _ in range(3):
-        solid = thicken(grid, offset, hint)
-        wall = thinnest_wall(grid, solid.vertices[n_u * n_v:])
-        if wall >= target:
+    for smoothing in NORMAL_SMOOTHING:
+        offset = target
+        for _ in range(3):
+            solid = thicken(grid, offset, hint, smoothing)
+            wall = thinnest_wall(grid, solid.vertices[n_u * n_v:])
+            if wall >= target:
+                break
+            offset *= 1.02 * target / max(wall, 0.25 * target)
+        if self_intersecting_edges(solid) == 0:
             break
-        offset *= 1.02 * target / max(wall, 0.25 * target)
     return solid, wall
 
 
