@@ -129,3 +129,14 @@ def test_mould_encloses_exactly_the_cushion(designed):
             if other_name != name:
                 assert other.contains(inside).mean() < 0.005, (name, other_name)
         assert d.solid.contains(inside).mean() < 0.005  # and none of the mould is inside the cushion
+
+
+def test_self_intersections_are_found_and_designs_have_none(designed):
+    from cpapfit.export import self_intersecting_edges
+
+    a = trimesh.creation.box((10, 10, 10))
+    crossing = trimesh.util.concatenate([a, a.copy().apply_translation((3, 4, 2.5))])  # two boxes through each other
+    assert self_intersecting_edges(a) == 0 and self_intersecting_edges(crossing) > 0
+    _, d = designed
+    assert d.checks["self_intersecting_edges"] == 0
+    assert all(self_intersecting_edges(part) == 0 for part in d.mould_parts.values())
