@@ -17,6 +17,8 @@ from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
 
 KPA_PER_CMH2O = 0.0980665
+MAX_PRELOAD_MM = 5.0  # the most the rim is set into the skin anywhere
+STEP_MM, NEAR_MM = 1.0, 3.0  # a correction moves a seal point at most this far, from rim points this close
 MMHG_PER_KPA = 7.50062
 
 
@@ -177,19 +179,21 @@ def compensating_preload(
     not bend tighter than its wall. `normals` (K, 3) skin normals; `warped` the registered template."""
     k = stiffness(curve, warped, params.tissue).effective
     need = params.target_kpa / (k * np.maximum(np.abs(normals @ axis), COS_MIN))  # axial indentation, mm
-    return _lowest_zero(gaussian_filter1d(need, smoothing, mode="wrap"))
+    return _bounded(gaussian_filter1d(np.minimum(need, need.min() + MAX_PRELOAD_MM), smoothing, mode="wrap"))
 
 
 def refined_preload(preload: np.ndarray, curve: np.ndarray, fit: CushionFit, smoothing: float, params: FitParams = FitParams()) -> np.ndarray:
     """The pre-load (K,) mm along `curve` (K, 3) corrected by what pressing the cushion built with
     it gave (`fit`): each point goes deeper by (target - pressure) / axial stiffness."""
     c = fit.rim.covered
-    near = cKDTree(fit.rim.points[c]).query(curve)[1]
+    dist, near = cKDTree(fit.rim.points[c]).query(curve)
     axial = fit.stiffness.effective[c][near] * np.maximum(fit.rim.cos[c][near], COS_MIN)
-    correction = (params.target_kpa - fit.pressure_kpa[c][near]) / axial
-    return _lowest_zero(preload + gaussian_filter1d(correction, smoothing, mode="wrap"))
+    correction = np.where(dist <= NEAR_MM, (params.target_kpa - fit.pressure_kpa[c][near]) / axial, 0.0)
+    return _bounded(preload + gaussian_filter1d(np.clip(correction, -STEP_MM, STEP_MM), smoothing, mode="wrap"))
 
 
-def _lowest_zero(preload: np.ndarray) -> np.ndarray:
-    """Pre-loads shifted so that the least is zero (the rest of the shift is the mask's travel)."""
-    return preload - preload.min()
+def _bounded(preload: np.ndarray) -> np.ndarray:
+    """Pre-loads shifted so that the least is zero (the rest of the shift is the mask's travel) and
+    capped at MAX_PRELOAD_MM: where more would be needed (skin nearly parallel to the axis, where
+    pushing along the axis hardly presses), the geometry cannot compensate and the evaluation says so."""
+    return np.minimum(preload - preload.min(), MAX_PRELOAD_MM)
