@@ -15,7 +15,7 @@ UNITS = (
     ("_fraction", "%", 100.0, 1), ("_mm", "mm", 1.0, 2), ("_kpa", "kPa", 1.0, 2), ("_mmhg", "mmHg", 1.0, 1),
     ("_cmh2o", "cmH₂O", 1.0, 1), ("_force_n", "N", 1.0, 1), ("_l_min", "L/min", 1.0, 2), ("_cv", "", 1.0, 3),
 )
-HEADLINE = (  # (path under fit["custom"|"generic"] or under the seating record, label)
+HEADLINE = (  # (key under fit["custom"|"generic"], label)
     ("contact_fraction", "rim in contact with the skin"),
     ("window_fraction", "rim within the safe pressure window"),
     ("pressure_mean_kpa", "mean contact pressure"),
@@ -23,13 +23,10 @@ HEADLINE = (  # (path under fit["custom"|"generic"] or under the seating record,
     ("pressure_max_kpa", "peak contact pressure"),
     ("pressure_max_mmhg", "peak contact pressure"),
     ("leak_l_min", "leak at the set CPAP pressure"),
+    ("seal_force_n", "least headgear force that seals"),
+    ("gap_before_load_median_mm", "rim-to-skin gap before load, median (custom: with its pre-load)"),
+    ("rim_covered_fraction", "rim over scanned skin (the numbers above are over this part)"),
 )
-SEATED = (
-    ("seated_gap_median_mm", "rim-to-skin gap, median (rigid cushion, before the skin gives)"),
-    ("seated_gap_max_mm", "rim-to-skin gap, largest"),
-    ("rim_over_1mm_fraction", "rim more than 1 mm off the skin"),
-)
-SEATED_KEY = "seated_along_mask_axis"
 CUSHIONS = ("custom", "generic")
 
 
@@ -85,10 +82,10 @@ def lookup(fit: dict, path: str):
 
 
 def headline_table(fit: dict) -> str:
-    """Custom vs generic: the evaluation's numbers (when present) and the seated gaps."""
+    """Custom vs generic: the evaluation's numbers (those present)."""
     body = []
-    for key, label, prefix in [(k, label, "") for k, label in HEADLINE] + [(k, label, f"{SEATED_KEY}.") for k, label in SEATED]:
-        paths = [f"{prefix}{c}.{key}" for c in CUSHIONS]
+    for key, label in HEADLINE:
+        paths = [f"{c}.{key}" for c in CUSHIONS]
         if lookup(fit, paths[0]) is None:
             continue
         cells = "".join(value_cell(p, lookup(fit, p)) for p in paths)
