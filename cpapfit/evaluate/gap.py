@@ -40,39 +40,3 @@ def rim_gap(rim: np.ndarray, scan: Scan) -> RimGap:
     _, dist, tri = trimesh.proximity.closest_point(mesh, rim)
     rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
     return RimGap(dist, ~rims[scan.faces[tri]].any(axis=1))
-
-
-@dataclass(frozen=True)
-class Seating:
-    """A rigid cushion pushed along its axis until its rim first touches the skin.
-
-    gap: (K,) mm between each rim point and the skin along the axis after seating (0 where it
-    touches); covered: (K,) the skin was found along the axis under the point; shift_mm: how far
-    the cushion moved along the axis (negative: towards the face)."""
-
-    gap: np.ndarray
-    covered: np.ndarray
-    shift_mm: float
-
-    def __post_init__(self):
-        freeze_arrays(self)
-
-    def summary(self) -> dict:
-        g = self.gap[self.covered]
-        return {
-            "seated_gap_median_mm": float(np.median(g)), "seated_gap_max_mm": float(g.max()),
-            "rim_over_1mm_fraction": float((g > 1.0).mean()), "rim_covered_fraction": float(self.covered.mean()),
-            "seating_shift_mm": self.shift_mm,
-        }
-
-
-def seat(rim: np.ndarray, axis: np.ndarray, scan: Scan, reach_mm: float = 40.0) -> Seating:
-    """Seat (K, 3) rim points along the unit mask `axis` (out of the face) on the scan surface."""
-    mesh = trimesh.Trimesh(scan.vertices, scan.faces, process=False)
-    origins = rim + reach_mm * axis
-    loc, ray, _ = mesh.ray.intersects_location(origins, np.tile(-axis, (len(rim), 1)), multiple_hits=False)
-    along = np.full(len(rim), np.nan)
-    along[ray] = np.linalg.norm(loc - origins[ray], axis=1) - reach_mm  # > 0: skin below the rim
-    covered = np.isfinite(along)
-    shift = float(np.nanmin(along))
-    return Seating(np.where(covered, along - shift, np.nan), covered, -shift)
