@@ -11,7 +11,7 @@ from .cushion.generic import NOSE_TIP
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet, cushion_solid
 from .evaluate.fit import Face, FitParams, compensating_preload, fit_cushion, refined_preload
-from .export import WALL_TOLERANCE, self_intersecting_edges
+from .export import WALL_TOLERANCE
 from .frozen import freeze_arrays
 
 SMOOTHING = (3.0, 6.0, 12.0)  # Gaussian widths tried for the pre-load, in seal-curve samples (of 128)
@@ -40,7 +40,7 @@ def compensated_cushion(
         pressed = fit_cushion(cushion_sheet(first), face, params.flange_mm, None, fit_params)
         preload = refined_preload(preload, contact.curve, pressed, smoothing, fit_params)
         cushion = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)
-        solid, wall = cushion_solid(cushion, contact.normals)
-        if wall >= WALL_TOLERANCE * params.wall_mm and self_intersecting_edges(solid) == 0:
+        solid, wall, folds = cushion_solid(cushion, contact.normals)
+        if wall >= WALL_TOLERANCE * params.wall_mm and folds == 0:
             break
     return cushion, Preload(preload, smoothing), solid, wall
