@@ -4,6 +4,7 @@ capture, and trimesh's nricp_amberg on the same pair (issue 4 figures).
 Usage:
   .venv/bin/python bench/nonrigid.py accuracy [--seeds 50]
   .venv/bin/python bench/nonrigid.py speed
+  .venv/bin/python bench/nonrigid.py holes [--seeds 10]
   .venv/bin/python bench/nonrigid.py amberg [--seeds 2]
 """
 
@@ -12,17 +13,19 @@ import platform
 import resource
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from cpapfit.align.correspondences import nearest_on_grid
 from cpapfit.align.nonrigid import NonrigidParams, register
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit import metrics
 from cpapfit.metrics import mask_region
-from cpapfit.phantom import make_phantom
+from cpapfit.phantom import make_phantom, with_holes
 from cpapfit.pipeline import align
 from cpapfit.template import load_template
 
@@ -40,17 +43,28 @@ def scan_to_template(scan, vertices):
     return metrics.scan_to_template(scan.vertices, vertices, TEMPLATE.faces, REGION)
 
 
-def timed_register(aligned, scan, al, mode):
+PAPER = NonrigidParams(affine=None, detected_landmark_factor=1.0)  # the paper's method, no additions
+
+
+def timed_register(aligned, scan, al, mode, params=NonrigidParams()):
     t0 = time.perf_counter()
-    reg = register(aligned, TEMPLATE.faces, scan, al.landmarks, NonrigidParams(correspondence=mode))
+    reg = register(aligned, TEMPLATE.faces, scan, al.landmarks, replace(params, correspondence=mode))
     return reg, time.perf_counter() - t0
 
 
-def subjects(seeds: int):
-    """(seed, phantom, scan, alignment, similarity-aligned template) for seeds 0..seeds-1."""
+def correspondence(vertices, truth, region=REGION):
+    """Mean distance (mm) of registered region vertices to their true positions."""
+    return float(np.linalg.norm(vertices[region] - truth[region], axis=1).mean())
+
+
+def subjects(seeds: int, hole_fraction: float = 0.0):
+    """(seed, phantom, scan, alignment, similarity-aligned template) for seeds 0..seeds-1, with
+    `hole_fraction` of the mask region's depth removed in blobs."""
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(seeds):
             ph = make_phantom(seed)
+            if hole_fraction:
+                ph = with_holes(ph, REGION, hole_fraction, seed)
             scan = capture(ph, Path(tmp) / str(seed))
             al = align(scan)
             yield seed, ph, scan, al, al.similarity.apply(TEMPLATE.vertices)
@@ -61,10 +75,12 @@ def accuracy(seeds: int) -> None:
     for _, ph, scan, al, aligned in subjects(seeds):
         grid, t_grid = timed_register(aligned, scan, al, "grid")
         kd, t_kd = timed_register(aligned, scan, al, "kdtree")
+        paper, _ = timed_register(aligned, scan, al, "grid", PAPER)
         d = scan_to_template(scan, grid.vertices)
         rows.append({
-            "corr": np.linalg.norm(grid.vertices[REGION] - ph.surface[REGION], axis=1).mean(),
-            "corr_similarity": np.linalg.norm(aligned[REGION] - ph.surface[REGION], axis=1).mean(),
+            "corr": correspondence(grid.vertices, ph.surface),
+            "corr_similarity": correspondence(aligned, ph.surface),
+            "corr_paper": correspondence(paper.vertices, ph.surface),
             "median": np.median(d), "p95": np.percentile(d, 95), "flipped": metrics.flipped_triangles(aligned, grid.vertices, TEMPLATE.faces, REGION),
             "modes": np.linalg.norm(grid.vertices[REGION] - kd.vertices[REGION], axis=1).mean(),
             "t_grid": t_grid, "t_kd": t_kd, "iterations": len(grid.log), "pooled": d,
@@ -72,6 +88,7 @@ def accuracy(seeds: int) -> None:
     print(f"machine: {platform.machine()}, Python {platform.python_version()}, seeds 0-{seeds - 1}")
     for key, label in (
         ("corr_similarity", "correspondence after similarity only, mask-region mean (mm)"),
+        ("corr_paper", "correspondence after the paper's non-rigid (no affine start, landmark weight 10) (mm)"),
         ("corr", "correspondence after non-rigid, mask-region mean distance to true position (mm)"),
         ("median", "scan-to-template distance over mask region, median per seed (mm)"),
         ("p95", "scan-to-template distance over mask region, p95 per seed (mm)"),
@@ -106,7 +123,7 @@ def speed() -> None:
             for _ in range(3):
                 reg, t = timed_register(aligned, scan, al, mode)
                 times.append(t)
-            corr = np.linalg.norm(reg.vertices[REGION] - ph.surface[REGION], axis=1).mean()
+            corr = correspondence(reg.vertices, ph.surface)
             print(f"{mode}: best of 3 {min(times):.2f} s, median {np.median(times):.2f} s, {len(reg.log)} iterations, correspondence {corr:.3f} mm")
         print(f"peak resident memory of the whole process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
@@ -127,20 +144,34 @@ def amberg(seeds: int) -> None:
         t_theirs = time.perf_counter() - t0
         for name, v, t in (("cpapfit", ours.vertices, t_ours), ("nricp_amberg", theirs, t_theirs)):
             d = scan_to_template(scan, v)
-            corr = np.linalg.norm(v[REGION] - ph.surface[REGION], axis=1).mean()
+            corr = correspondence(v, ph.surface)
             print(f"seed {seed} {name:>12}: {t:7.2f} s, correspondence {corr:.3f} mm, scan-to-template median {np.median(d):.3f} p95 {np.percentile(d, 95):.3f} mm")
         print(f"seed {seed} time ratio nricp_amberg / cpapfit: {t_theirs / t_ours:.1f}x")
 
 
+def holes(seeds: int) -> None:
+    """30 % of the mask region's depth removed in blobs: error of the vertices over the holes."""
+    print(f"machine: {platform.machine()}, Python {platform.python_version()}, seeds 0-{seeds - 1}, 30 % of the mask region's depth removed")
+    errors = []
+    for _, ph, scan, al, aligned in subjects(seeds, 0.3):
+        reg, _ = timed_register(aligned, scan, al, "grid")
+        matched = nearest_on_grid(scan, ph.surface[REGION]) >= 0  # the true position's pixel holds depth
+        errors.append(correspondence(reg.vertices, ph.surface, REGION[~matched]))
+        print(f"over the holes: {errors[-1]:.3f} mm; whole region {correspondence(reg.vertices, ph.surface):.3f} mm")
+    print(f"mean over seeds {np.mean(errors):.3f} mm, max {np.max(errors):.3f} mm")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("what", choices=["accuracy", "speed", "amberg"])
+    ap.add_argument("what", choices=["accuracy", "speed", "holes", "amberg"])
     ap.add_argument("--seeds", type=int, default=None)
     args = ap.parse_args()
     if args.what == "accuracy":
         accuracy(args.seeds or 50)
     elif args.what == "speed":
         speed()
+    elif args.what == "holes":
+        holes(args.seeds or 10)
     else:
         amberg(args.seeds or 2)
 

@@ -3,8 +3,9 @@
 On the template, the region's centre curve (an edge path) is resampled evenly, smoothed, and
 stored as barycentric points on template triangles. Through the registration (same triangles,
 warped vertices) they land on the patient's face; each is then moved to the closest point of
-the scan itself where the scan has data within PROJECT_MM, so the cushion touches the real face
-rather than the template's approximation of it.
+the scan itself where the scan has data within PROJECT_MM along the skin normal (at most
+TANGENT_MM sideways: near a hole the closest point is on the hole's rim, and the seal must not
+be dragged there), so the cushion touches the real face rather than the template's approximation of it.
 """
 
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ from .template import Template, load_template
 SAMPLES = 128  # points around the seal
 SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples
 PROJECT_MM = 3.0  # farther from the scan than this: no scan data there, keep the registered point
+TANGENT_MM = 1.0  # a closest scan point farther sideways than this is a hole's rim: keep the registered point
 
 
 @dataclass(frozen=True)
@@ -74,16 +76,19 @@ def transfer_contact(template: Template, warped: np.ndarray, scan: Scan, mask: s
     carried = np.einsum("kj,kjc->kc", bary, corners)
     normals = np.einsum("kj,kjc->kc", bary, trimesh.Trimesh(warped, template.faces, process=False).vertex_normals[template.faces[tri]])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    curve, on_scan = _onto_scan(carried, scan)
+    curve, on_scan = onto_scan(carried, normals, scan)
     return Contact(mask, curve, normals, on_scan, warped[template.regions[mask].band])
 
 
-def _onto_scan(points: np.ndarray, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
-    """Closest scan surface points (or vertices, for a point cloud) within PROJECT_MM."""
+def onto_scan(points: np.ndarray, normals: np.ndarray, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
+    """Closest scan surface points (or vertices, for a point cloud) within PROJECT_MM of the
+    (K, 3) points and within TANGENT_MM of their (K, 3) unit normals' lines."""
     if scan.is_point_cloud:
         dist, idx = cKDTree(scan.vertices).query(points)
         closest = scan.vertices[idx]
     else:
         closest, dist, _ = trimesh.proximity.closest_point(trimesh.Trimesh(scan.vertices, scan.faces, process=False), points)
-    near = dist <= PROJECT_MM
+    offset = closest - points
+    sideways = np.linalg.norm(offset - np.einsum("ij,ij->i", offset, normals)[:, None] * normals, axis=1)
+    near = (dist <= PROJECT_MM) & (sideways <= TANGENT_MM)
     return np.where(near[:, None], closest, points), near

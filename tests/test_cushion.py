@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.contact import template_curve
+from cpapfit.contact import onto_scan, template_curve
 from cpapfit.cushion.nurbs import AROUND, ROWS
 from cpapfit.export import threemf_bytes
+from cpapfit.scan import Scan
 from cpapfit.template import load_template
 
 WIDTH_MM = {"nasal": (40.0, 60.0), "oronasal": (80.0, 110.0)}
@@ -140,3 +141,19 @@ def test_self_intersections_are_found_and_designs_have_none(designed):
     _, d = designed
     assert d.checks["self_intersecting_edges"] == 0
     assert all(self_intersecting_edges(part) == 0 for part in d.mould_parts.values())
+
+
+def test_seal_points_over_a_hole_are_not_dragged_to_its_rim():
+    """A flat scan (z = 0, 1 mm grid) with a hole of radius 6 mm; seal points 0.5 mm above it:
+    those over data drop onto the scan, those over the hole stay (their closest point is its rim)."""
+    n = 31
+    xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
+    corner = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    faces = np.concatenate([np.column_stack([corner, corner + 1, corner + n]), np.column_stack([corner + 1, corner + n + 1, corner + n])])
+    vertices = np.column_stack([xy, np.zeros(len(xy))])
+    faces = faces[(np.linalg.norm(xy[faces], axis=2) > 6.0).all(axis=1)]
+    scan = Scan(vertices, faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
+    points = np.array([[0.0, 0.0, 0.5], [4.5, 0.0, 0.5], [10.0, 0.0, 0.5], [-10.0, 3.0, 0.5]])
+    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (4, 1)), scan)
+    assert on_scan.tolist() == [False, False, True, True]
+    assert np.allclose(moved[:2], points[:2]) and np.allclose(moved[2:], points[2:] - [0, 0, 0.5], atol=1e-9)

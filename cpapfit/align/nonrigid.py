@@ -1,13 +1,21 @@
 """Non-rigid registration: the paper's elastic ICP of the similarity-aligned template onto the scan.
 
+Two additions to the paper, both switchable: the template first gets an affine start (align/affine.py:
+the face's proportions, so that the elastic stage finds only local shape), and detected landmarks
+(MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
+landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
+to ~1 mm; a user's landmarks keep the paper's weight. With both off (`affine=None`,
+`detected_landmark_factor=1`) this is the paper's method.
+
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
 (2) reject pairs > 5 mm apart, with normals > 25 deg apart, or on the scan's boundary;
-(3) solve for the displacement field D (from the similarity-aligned template V0) minimising
+(3) solve for the displacement field D (from V0, the similarity-aligned template after the affine start) minimising
 
     0.1 * sum |V0 + D - c|^2 + 1 * sum (n_c . (V0 + D - c))^2 + 100 * D^T L D + 10 * sum_k |V0_k + D_k - r_k|^2
 
 (point-to-point, point-to-plane, membrane with cotangent weights L, landmarks r);
-(4) when the relative change of D falls under 1e-2 (or after level_iterations at one stiffness,
+(4) when the relative change of D (relative to the template's whole movement from the
+similarity) falls under 1e-2 (or after level_iterations at one stiffness,
 so that slow scans still reach the final stiffness), halve the membrane and landmark weights;
 stop when that happens at the final stiffness (after `relaxations` halvings) or at max_iterations.
 
@@ -28,6 +36,7 @@ from scipy.sparse import csr_matrix, diags
 from ..frozen import freeze_arrays
 from ..landmarks.types import Landmarks
 from ..scan import Scan
+from .affine import AffineParams, apply_affine, fit_affine
 from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
 
@@ -49,6 +58,8 @@ class NonrigidParams:
     max_iterations: int = 40
     correspondence: str = "auto"
     min_landmark_confidence: float = 0.5
+    detected_landmark_factor: float = 0.1
+    affine: AffineParams | None = AffineParams()
 
 
 @dataclass(frozen=True)
@@ -102,24 +113,25 @@ def register(
     vf = incidence(len(aligned), faces)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, vertex_normals(aligned, faces, vf))
     lap = laplacian(aligned, faces)
+    start = _affine_start(aligned, vertex_normals(aligned, faces, vf), target, params)
     lm_index, lm_target = _landmark_targets(landmarks, params)
     selector = np.zeros(len(aligned))
     selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
-    mu, lam = params.membrane, params.landmark
+    mu, lam = params.membrane, _landmark_weight(landmarks, params)
     system = _System(w_data, lap, selector, mu, lam)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
     for it in range(1, params.max_iterations + 1):
         at_level += 1
-        current = aligned + disp
+        current = start + disp
         m = match(target, current, vertex_normals(current, faces, vf), params.max_distance_mm, params.max_normal_deg)
         pull = _data_targets(current, m, target, params)
-        rhs = w_data * (pull - aligned)
-        rhs[lm_index] += lam * (lm_target - aligned[lm_index])
+        rhs = w_data * (pull - start)
+        rhs[lm_index] += lam * (lm_target - start[lm_index])
         new = system.solve(rhs)
-        change = float(np.linalg.norm(new - disp) / max(np.linalg.norm(new), 1e-12))
+        change = float(np.linalg.norm(new - disp) / max(np.linalg.norm(start + new - aligned), 1e-12))
         disp = new
         res = _plane_distance(current, m, target)[m.valid]
         log.append(IterationLog(it, mu, lam, int(m.valid.sum()), float(res.mean()) if len(res) else np.nan, change))
@@ -129,10 +141,25 @@ def register(
             relaxed, at_level = relaxed + 1, 0
             mu, lam = mu * params.relax_factor, lam * params.relax_factor
             system.refactor(mu, lam)
-    final = aligned + disp
+    final = start + disp
     m = match(target, final, vertex_normals(final, faces, vf), params.max_distance_mm, params.max_normal_deg)
     residual = np.where(m.valid, _plane_distance(final, m, target), np.nan)
     return Registration(final, residual, m.valid, tuple(log))
+
+
+def _landmark_weight(landmarks: Landmarks | None, params: NonrigidParams) -> float:
+    """The landmark term's weight: the paper's for a user's landmarks, scaled for detected ones."""
+    user = landmarks is None or landmarks.path == "user"
+    return params.landmark * (1.0 if user else params.detected_landmark_factor)
+
+
+def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, params: NonrigidParams) -> np.ndarray:
+    """(n, 3) the similarity-aligned template stretched by the affine start (unchanged if params.affine is None)."""
+    if params.affine is None:
+        return aligned
+    weights = (params.point_to_point, params.point_to_plane)
+    gates = (params.max_distance_mm, params.max_normal_deg)
+    return apply_affine(fit_affine(aligned, normals, target, weights, gates, params.affine), aligned)
 
 
 def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
