@@ -15,6 +15,7 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.fallback import fallback_alignment
+from cpapfit.landmarks.lift import row_median, row_percentile
 from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.phantom import make_phantom
 from cpapfit.scan import Intrinsics
@@ -182,3 +183,18 @@ def test_two_faces_are_refused(tmp_path):
     Image.fromarray(image).save(tmp_path / "color.png")
     with pytest.raises(InputError, match="two faces"):
         initial_alignment(load_scan(tmp_path), TEMPLATE)
+
+
+def test_window_median_and_percentiles_equal_numpys_to_the_bit():
+    """The vectorised window statistics of `lift` give np.nanmedian's and np.nanpercentile's numbers
+    exactly, on windows with every count of valid pixels (all-NaN rows: NaN)."""
+    rng = np.random.default_rng(0)
+    window = rng.normal(500.0, 5.0, (2600, 25))
+    window[rng.random(window.shape) < np.repeat(np.linspace(0.0, 1.0, 26), 100)[:, None]] = np.nan
+    ranked, count = np.sort(window, axis=1), np.isfinite(window).sum(axis=1)
+    assert set(count) == set(range(26))
+    with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+        expected = [np.nanmedian(window, axis=1), *(np.nanpercentile(window, q, axis=1) for q in (10, 90))]
+    got = [row_median(ranked, count), *(row_percentile(ranked, count, q) for q in (10, 90))]
+    for e, g in zip(expected, got):
+        assert np.array_equal(e, g, equal_nan=True)

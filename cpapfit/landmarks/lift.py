@@ -1,7 +1,5 @@
 """Pixel landmarks lifted to 3-D through a depth image, robustly over a small neighbourhood."""
 
-import warnings
-
 import numpy as np
 
 from ..scan import Intrinsics
@@ -26,15 +24,32 @@ def lift(uv: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics, radius: i
     inside = (cols >= 0) & (cols < w) & (rows >= 0) & (rows < h)
     window = np.full(cols.shape, np.nan)
     window[inside] = depth_mm[rows[inside], cols[inside]]
-    valid_frac = np.isfinite(window).mean(axis=1)
-    with warnings.catch_warnings():  # all-NaN windows are expected: they are not ok
-        warnings.simplefilter("ignore", RuntimeWarning)
-        z = np.nanmedian(window, axis=1)
-        spread = np.nanpercentile(window, 90, axis=1) - np.nanpercentile(window, 10, axis=1)
-    ok = (valid_frac >= MIN_VALID_FRACTION) & np.isfinite(z) & (spread <= MAX_SPREAD_MM)
+    ranked, count = np.sort(window, axis=1), np.isfinite(window).sum(axis=1)
+    z = row_median(ranked, count)
+    spread = row_percentile(ranked, count, 90) - row_percentile(ranked, count, 10)
+    ok = (count / window.shape[1] >= MIN_VALID_FRACTION) & np.isfinite(z) & (spread <= MAX_SPREAD_MM)
     x = (uv[:, 0] - intrinsics.cx) / intrinsics.fx * z
     y = (uv[:, 1] - intrinsics.cy) / intrinsics.fy * z
     points = np.stack([x, y, z], axis=1)
     points[~ok] = np.nan
     return points, ok
 
+
+def row_median(ranked: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(K,) median of the first count[k] values of each sorted row (NaN where none), as np.nanmedian."""
+    rows, last = np.arange(len(ranked)), np.maximum(count - 1, 0)
+    mid = (ranked[rows, last // 2] + ranked[rows, (last + 1) // 2]) / 2.0
+    return np.where(count > 0, mid, np.nan)
+
+
+def row_percentile(ranked: np.ndarray, count: np.ndarray, q: float) -> np.ndarray:
+    """(K,) q-th percentile (linear) of the first count[k] values of each sorted row (NaN where none),
+    with np.nanpercentile's arithmetic, so the results are the same to the bit."""
+    at = (count - 1) * (q / 100.0)
+    lo = np.clip(np.floor(at), 0, np.maximum(count - 1, 0)).astype(np.int64)
+    hi = np.minimum(lo + 1, np.maximum(count - 1, 0))
+    rows = np.arange(len(ranked))
+    a, b, t = ranked[rows, lo], ranked[rows, hi], at - np.floor(at)
+    diff = b - a
+    out = np.where(t >= 0.5, b - diff * (1.0 - t), a + diff * t)
+    return np.where(count > 0, out, np.nan)
