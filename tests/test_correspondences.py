@@ -1,0 +1,46 @@
+"""The scan as the registration's target: a coarse mesh scan subdivided without cracks, and the
+registration on the shared fran scan (3 mm triangles) lying on the scan's real surface."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from cpapfit.align.correspondences import boundary_vertices, subdivided
+from cpapfit.io import load_scan
+from cpapfit.metrics import mask_region
+from cpapfit.pipeline import align, register_template
+from cpapfit.template import load_template
+
+
+def holed_sphere():
+    """A 40 mm sphere of ~3.5 mm triangles with a cap cut off (one rim)."""
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=40.0)
+    mesh = trimesh.Trimesh(sphere.vertices, sphere.faces[sphere.triangles_center[:, 2] < 30.0], process=False)
+    mesh.remove_unreferenced_vertices()
+    return mesh
+
+
+def test_subdivision_keeps_the_surface_and_its_only_rim():
+    mesh = holed_sphere()
+    vertices, faces = subdivided(mesh.vertices, mesh.faces, 1.0)
+    edges = np.linalg.norm(vertices[faces[:, 0]] - vertices[faces[:, 1]], axis=1)
+    assert np.median(edges) <= 1.0 < 2.0 * np.median(edges)  # as few halvings as it takes
+    _, dist, _ = trimesh.proximity.closest_point(mesh, vertices)
+    assert dist.max() < 1e-9  # new vertices lie on the original triangles
+    rim = boundary_vertices(len(vertices), faces)
+    on_rim_before = boundary_vertices(len(mesh.vertices), mesh.faces)
+    rim_edges = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).outline().entities
+    assert rim.sum() == 2 ** 2 * on_rim_before.sum() == 2 ** 2 * sum(len(e.points) - 1 for e in rim_edges)
+    assert len(np.unique(vertices, axis=0)) == len(vertices)  # midpoints shared: no cracks
+
+
+@pytest.mark.shared
+def test_fran_registers_onto_its_real_surface(shared_data):
+    """fran's 3 mm triangles are subdivided for the k-d tree; the registered mask region must lie on
+    the scan's triangles themselves (closest point), not only near the subdivision's vertices."""
+    scan = load_scan(shared_data / "fran_cyberware" / "fran.obj")
+    reg = register_template(scan, align(scan))
+    region = mask_region(load_template())
+    _, dist, _ = trimesh.proximity.closest_point(trimesh.Trimesh(scan.vertices, scan.faces, process=False), reg.vertices[region])
+    assert (dist < 3.0).mean() > 0.99
+    assert np.median(dist) <= 0.15 and np.percentile(dist, 95) <= 0.7
