@@ -6,6 +6,11 @@ minus the plug, split in two along the plane through the mask axis and the head'
 so that each half comes off sideways. A pour spout and vents run from the block's top (the
 frame side) into the cavity, and two keys on the parting face (bumps on one half, sockets with
 clearance on the other) register the halves.
+
+Demoulding (`draft.py`): each half is pulled straight off the parting plane, the core out along the
+mask axis through whichever opening leaves less undercut; the draft of each part's moulding surface
+(its faces that touch the cushion) is measured, not corrected: the cast silicone flexes over small
+undercuts, so they are reported for the caster.
 """
 
 from dataclasses import dataclass
@@ -16,17 +21,21 @@ import trimesh
 
 from .cushion.nurbs import Cushion
 from .cushion.solid import sheet_faces
+from .draft import Draft, draft
 
 MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
 KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
+PROBE_MM = 0.01  # a part's face touches the cast when the cast is this far off it
 
 
 @dataclass(frozen=True)
 class Mould:
-    """The mould parts as trimesh solids: {"mould_left", "mould_right", "mould_core"}."""
+    """The mould parts as trimesh solids: {"mould_left", "mould_right", "mould_core"}, and the draft
+    of each one's moulding surface along its pull direction (same keys)."""
 
     parts: dict
+    draft: dict
 
 
 def to_manifold(mesh: trimesh.Trimesh) -> m3.Manifold:
@@ -81,7 +90,29 @@ def mould(cushion: Cushion, solid: trimesh.Trimesh, n_u: int = 128, n_v: int = 2
         at = frame.T @ np.array([centre[0], y, lo[2] + MARGIN_MM / 2])
         key = m3.Manifold.sphere(KEY_MM, 32).translate(at)
         left, right = left + key, right - m3.Manifold.sphere(KEY_MM + KEY_CLEARANCE_MM, 32).translate(at)
-    return Mould({"mould_left": to_trimesh(left), "mould_right": to_trimesh(right), "mould_core": to_trimesh(core)})
+    parts = {"mould_left": to_trimesh(left), "mould_right": to_trimesh(right), "mould_core": to_trimesh(core)}
+    return Mould(parts, demoulding(parts, solid, side, axis))
+
+
+def demoulding(parts: dict, cast: trimesh.Trimesh, side: np.ndarray, axis: np.ndarray) -> dict:
+    """{part name: Draft}: the halves pulled off the parting plane (normal `side`, towards the left
+    half), the core along the mask `axis` out through whichever opening leaves less undercut."""
+    pulls = {"mould_left": ((side, "off the parting plane, towards the patient's left"),),
+             "mould_right": ((-side, "off the parting plane, towards the patient's right"),),
+             "mould_core": ((axis, "along the mask axis, out through the frame opening"),
+                            (-axis, "along the mask axis, out through the face opening"))}
+    return {name: _least_undercut(part, moulding_faces(part, cast), pulls[name]) for name, part in parts.items()}
+
+
+def moulding_faces(part: trimesh.Trimesh, cast: trimesh.Trimesh) -> np.ndarray:
+    """(K, 3) the faces of a mould part that touch the cast: just off them, along their outward normal, is the cast."""
+    probe = part.triangles_center + PROBE_MM * part.face_normals
+    return part.faces[cast.contains(probe)]
+
+
+def _least_undercut(part: trimesh.Trimesh, faces: np.ndarray, pulls: tuple) -> Draft:
+    """The draft of a part's moulding faces along the candidate pull ((direction, name), ...) that leaves least undercut."""
+    return min((draft(part.vertices, faces, pull, name) for pull, name in pulls), key=lambda d: d.undercut_fraction)
 
 
 def _channel(start_local: np.ndarray, top: float, diameter: float, to_scan: np.ndarray) -> m3.Manifold:

@@ -88,6 +88,7 @@ class Design:
     rim: RimGap  # the rim before its pressure-compensating pre-load, against the scan
     preload: Preload  # the rim set into the skin along the axis, along the seal curve
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
+    mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
     fits: dict  # {"custom" | "generic": CushionFit}, both at the custom cushion's recommended force
     fit_params: FitParams
 
@@ -121,12 +122,13 @@ def design(
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
     on_stage("casting mould")
-    parts = mould(cushion, solid).parts
-    for name, part in parts.items():
+    moulded = mould(cushion, solid)
+    for name, part in moulded.parts.items():
         check_closed(part, name)
     on_stage("pressure and leak")
     fits = evaluate(face, al, solid, mask, params, fit_params)
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan), preload, parts, fits, fit_params)
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan), preload,
+                  moulded.parts, moulded.draft, fits, fit_params)
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:

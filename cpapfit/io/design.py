@@ -4,6 +4,7 @@ import numpy as np
 
 from .. import __version__
 from ..align.nonrigid import Registration
+from ..draft import MIN_DRAFT_DEG
 from ..export import stl_bytes, threemf_bytes
 from ..evaluate.fit import FitParams
 from ..evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
@@ -27,6 +28,16 @@ def mask_dimensions(d: Design) -> dict:
     side = np.cross(up, axis)
     v = d.solid.vertices
     return {f"{k}_mm": round(float(np.ptp(v @ a)), 2) for k, a in (("width", side), ("height", up), ("depth", axis))}
+
+
+def mould_record(drafts: dict) -> dict:
+    """The casting mould's part of fit.json: each part's demoulding draft, and what it means."""
+    return {
+        **{name: d.record() for name, d in drafts.items()},
+        "draft_about": f"draft of each part's moulding surface along its pull direction; below {MIN_DRAFT_DEG:g} deg it drags, "
+                       "below 0 it is an undercut: measured, not removed (the silicone cast flexes over small undercuts; "
+                       "the parting plane is flat and the walls are not tapered)",
+    }
 
 
 def evaluation_record(fits: dict, params: FitParams) -> dict:
@@ -67,6 +78,7 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
         "cushion": {**mask_dimensions(d), **d.checks},
         "fit_before_compression": d.rim.summary(),
+        "mould": mould_record(d.mould_draft),
         "pressure_compensation": {
             "target_kpa": d.fit_params.target_kpa,
             "preload_mm": {k: round(float(f(d.preload.mm)), 3) for k, f in (("min", np.min), ("median", np.median), ("max", np.max))},

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 UNITS = (
     ("_fraction", "%", 100.0, 1), ("_mm", "mm", 1.0, 2), ("_kpa", "kPa", 1.0, 2), ("_mmhg", "mmHg", 1.0, 1),
     ("_cmh2o", "cmH₂O", 1.0, 1), ("_force_n", "N", 1.0, 1), ("_l_min", "L/min", 1.0, 2), ("_cv", "", 1.0, 3),
+    ("_deg", "°", 1.0, 1), ("_mm2", "mm²", 1.0, 0),
 )
 HEADLINE = (  # (key under fit["custom"|"generic"], label)
     ("contact_fraction", "rim in contact with the skin"),
