@@ -17,7 +17,6 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from .frozen import freeze_arrays
-from .scan import Scan
 from .template import Template, load_template
 
 SAMPLES = 128  # points around the seal
@@ -69,25 +68,26 @@ def template_curve(mask: str) -> tuple[np.ndarray, np.ndarray]:
     return tri, bary
 
 
-def transfer_contact(template: Template, warped: np.ndarray, scan: Scan, mask: str) -> Contact:
-    """The seal curve and band of `mask` on the patient, from the warped template (n, 3) mm."""
+def transfer_contact(template: Template, warped: np.ndarray, surface: trimesh.Trimesh | trimesh.PointCloud, mask: str) -> Contact:
+    """The seal curve and band of `mask` on the patient, from the warped template (n, 3) mm, moved
+    onto the scan's surface (`scan_surface`) where it is near."""
     tri, bary = template_curve(mask)
     corners = warped[template.faces[tri]]  # (K, 3, 3)
     carried = np.einsum("kj,kjc->kc", bary, corners)
     normals = np.einsum("kj,kjc->kc", bary, trimesh.Trimesh(warped, template.faces, process=False).vertex_normals[template.faces[tri]])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    curve, on_scan = onto_scan(carried, normals, scan)
+    curve, on_scan = onto_scan(carried, normals, surface)
     return Contact(mask, curve, normals, on_scan, warped[template.regions[mask].band])
 
 
-def onto_scan(points: np.ndarray, normals: np.ndarray, scan: Scan) -> tuple[np.ndarray, np.ndarray]:
-    """Closest scan surface points (or vertices, for a point cloud) within PROJECT_MM of the
-    (K, 3) points and within TANGENT_MM of their (K, 3) unit normals' lines."""
-    if scan.is_point_cloud:
-        dist, idx = cKDTree(scan.vertices).query(points)
-        closest = scan.vertices[idx]
+def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
+    """Closest points of the scan's surface (`scan_surface`; its vertices, for a point cloud) within
+    PROJECT_MM of the (K, 3) points and within TANGENT_MM of their (K, 3) unit normals' lines."""
+    if isinstance(surface, trimesh.PointCloud):
+        dist, idx = cKDTree(surface.vertices).query(points)
+        closest = surface.vertices[idx]
     else:
-        closest, dist, _ = trimesh.proximity.closest_point(trimesh.Trimesh(scan.vertices, scan.faces, process=False), points)
+        closest, dist, _ = trimesh.proximity.closest_point(surface, points)
     offset = closest - points
     sideways = np.linalg.norm(offset - np.einsum("ij,ij->i", offset, normals)[:, None] * normals, axis=1)
     near = (dist <= PROJECT_MM) & (sideways <= TANGENT_MM)

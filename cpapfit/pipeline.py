@@ -22,7 +22,7 @@ from .mould import mould
 from .quality import assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
-from .scan import Scan
+from .scan import Scan, scan_surface
 from .template import load_template
 
 # (stage, issue that builds it); order is the pipeline's.
@@ -113,10 +113,10 @@ def design(
     on_stage("non-rigid registration")
     reg = register_template(scan, al)
     on_stage("contact")
-    contact = transfer_contact(load_template(), reg.vertices, scan, mask)
+    face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
+    contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
     require_quality(assess(scan, al.landmarks, reg, contact))  # or refuse: rescan
     on_stage("cushion")
-    face = face_for(scan, al, reg)
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
@@ -127,14 +127,14 @@ def design(
         check_closed(part, name)
     on_stage("pressure and leak")
     fits = evaluate(face, al, solid, mask, params, fit_params)
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan), preload,
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan, face.scan), preload,
                   moulded.parts, moulded.draft, fits, fit_params)
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
     """The face cushions are pressed onto: the scan, its registered template, the mask axis (the
     template's +z carried by the similarity) and the head's up direction (its +y)."""
-    return face_of(scan, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
+    return face_of(scan_surface(scan), reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 
 def evaluate(

@@ -3,6 +3,7 @@
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 from .frozen import freeze_arrays
 
@@ -71,3 +72,9 @@ class Scan:
     def is_capture(self) -> bool:
         """True when the scan came from a depth image (grid correspondences possible)."""
         return self.depth is not None
+
+
+def scan_surface(scan: Scan) -> trimesh.Trimesh | trimesh.PointCloud:
+    """The scan as trimesh sees it (its triangles, or its points for a point cloud). A design builds
+    it once and hands it to every stage, so that its r-tree and Embree scene are built once."""
+    return trimesh.PointCloud(scan.vertices) if scan.is_point_cloud else trimesh.Trimesh(scan.vertices, scan.faces, process=False)

@@ -13,7 +13,7 @@ import trimesh
 from cpapfit.contact import onto_scan, template_curve
 from cpapfit.cushion.nurbs import AROUND, ROWS
 from cpapfit.export import threemf_bytes
-from cpapfit.scan import Scan
+from cpapfit.scan import Scan, scan_surface
 from cpapfit.template import load_template
 
 WIDTH_MM = {"nasal": (40.0, 60.0), "oronasal": (80.0, 110.0)}
@@ -154,6 +154,6 @@ def test_seal_points_over_a_hole_are_not_dragged_to_its_rim():
     faces = faces[(np.linalg.norm(xy[faces], axis=2) > 6.0).all(axis=1)]
     scan = Scan(vertices, faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
     points = np.array([[0.0, 0.0, 0.5], [4.5, 0.0, 0.5], [10.0, 0.0, 0.5], [-10.0, 3.0, 0.5]])
-    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (4, 1)), scan)
+    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (4, 1)), scan_surface(scan))
     assert on_scan.tolist() == [False, False, True, True]
     assert np.allclose(moved[:2], points[:2]) and np.allclose(moved[2:], points[2:] - [0, 0, 0.5], atol=1e-9)

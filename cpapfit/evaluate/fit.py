@@ -9,7 +9,6 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
-from ..scan import Scan
 from ..template import load_template
 from .leak import leak_l_min
 from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, press
@@ -143,9 +142,8 @@ class Face:
         freeze_arrays(self)
 
 
-def face_of(scan: Scan, warped: np.ndarray, axis: np.ndarray, up: np.ndarray) -> Face:
-    """The `Face` of a scan and its registered template vertices `warped` (N, 3) mm."""
-    surface = trimesh.PointCloud(scan.vertices) if scan.is_point_cloud else trimesh.Trimesh(scan.vertices, scan.faces, process=False)
+def face_of(surface: trimesh.Trimesh | trimesh.PointCloud, warped: np.ndarray, axis: np.ndarray, up: np.ndarray) -> Face:
+    """The `Face` of a scan's surface (`scan_surface`) and its registered template vertices `warped` (N, 3) mm."""
     return Face(surface, trimesh.Trimesh(warped, load_template().faces, process=False), axis, up)
 
 

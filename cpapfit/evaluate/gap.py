@@ -31,12 +31,11 @@ class RimGap:
         }
 
 
-def rim_gap(rim: np.ndarray, scan: Scan) -> RimGap:
-    """Distances from (K, 3) rim points to the scan (mm), and where the scan covers them."""
+def rim_gap(rim: np.ndarray, scan: Scan, surface: trimesh.Trimesh | trimesh.PointCloud) -> RimGap:
+    """Distances from (K, 3) rim points to the scan (mm; its surface: `scan_surface`), and where the scan covers them."""
     if scan.is_point_cloud:
         dist, _ = cKDTree(scan.vertices).query(rim)
         return RimGap(dist, np.ones(len(rim), dtype=bool))
-    mesh = trimesh.Trimesh(scan.vertices, scan.faces, process=False)
-    _, dist, tri = trimesh.proximity.closest_point(mesh, rim)
+    _, dist, tri = trimesh.proximity.closest_point(surface, rim)
     rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
     return RimGap(dist, ~rims[scan.faces[tri]].any(axis=1))
