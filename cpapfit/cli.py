@@ -117,7 +117,7 @@ def report_summary(out: Path, fit: dict) -> str:
 
 def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
-        run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage)
+        run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage, parallel=True)
     info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
     for warning in run.fit.get("warnings", []):
         info(f"rescan advised: {warning['message']}")
@@ -172,7 +172,7 @@ def cmd_demo(args) -> int:
         on_stage("synthetic subject")
         write_phantom(make_phantom(args.seed), subject)
         write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
-        run = design_job(subject, out / "design", "nasal", on_stage=on_stage)
+        run = design_job(subject, out / "design", "nasal", on_stage=on_stage, parallel=True)
     d, fit = run.design, run.fit
     summaries = {"scan": scan_summary(load_scan(subject)), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
     summaries.update(alignment_summaries(d.alignment))

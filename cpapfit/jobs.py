@@ -7,13 +7,16 @@ beside it and renamed into place; a run killed midway leaves only hidden folders
 `clean_leftovers` removes.
 """
 
+import contextlib
 import hashlib
 import json
+import multiprocessing
 import os
 import re
 import shutil
 import time
 import uuid
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -23,6 +26,7 @@ from .errors import CpapfitError, InputError
 from .io import load_scan
 from .io.design import design_files
 from .io.report import report_files
+from .report.assemble import at_once
 from .io.landmarks import read_landmarks
 from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files
@@ -55,18 +59,40 @@ class DesignRun:
     design: Design
 
 
+@contextlib.contextmanager
+def picture_worker(parallel: bool):
+    """`submit` for the report's pictures: a worker process forked now, while this process runs a
+    single thread (a fork copies only the calling thread: one taken after MediaPipe and Embree have
+    started theirs could hang in the child), or `at_once` when not parallel or not single-threaded."""
+    if not (parallel and _single_threaded()):
+        yield at_once
+        return
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        pool.submit(int).result()  # the fork, now
+        yield pool.submit
+
+
+def _single_threaded() -> bool:
+    """True when this process runs one thread (Linux's /proc/self/task); False where it cannot tell."""
+    try:
+        return len(os.listdir("/proc/self/task")) == 1
+    except OSError:
+        return False
+
+
 def design_job(
     scan_path: str | Path, out_dir: str | Path, mask: str = "nasal", landmarks_path: str | Path | None = None,
-    units: str = "auto", on_stage: Callable[[str], None] = _silent,
+    units: str = "auto", on_stage: Callable[[str], None] = _silent, parallel: bool = False,
 ) -> DesignRun:
     """`cpapfit design`: read the scan (and landmarks), design, build the report, write every file
-    atomically to `out_dir`."""
-    on_stage("reading the scan")
-    scan = load_scan(Path(scan_path), units)
-    d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage)
-    files = design_files(d, scan)
-    on_stage("report")
-    files |= report_files(d, scan, files)
+    atomically to `out_dir`. `parallel`: draw some report pictures in a second process (`picture_worker`)."""
+    with picture_worker(parallel) as submit:
+        on_stage("reading the scan")
+        scan = load_scan(Path(scan_path), units)
+        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage)
+        files = design_files(d, scan)
+        on_stage("report")
+        files |= report_files(d, scan, files, submit)
     on_stage("writing files")
     write_files(Path(out_dir), files)
     return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files), d)

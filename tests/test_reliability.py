@@ -4,12 +4,21 @@ and no network (sockets blocked)."""
 import contextlib
 import io
 import json
+import multiprocessing
 import socket
+import threading
+from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
 
 from cpapfit.cli import main
+from cpapfit.io import load_scan
+from cpapfit.io.design import design_files
+from cpapfit.io.report import report_files
+from cpapfit.jobs import picture_worker
+from cpapfit.pipeline import design
+from cpapfit.report.assemble import at_once
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.phantom import SensorModel, make_phantom, with_holes
@@ -113,3 +122,27 @@ def test_longest_hole_wraps_around_the_seal():
     bad = np.array([1, 1, 0, 0, 1, 0, 1, 1, 1], dtype=bool)
     assert longest_run(bad) == 5 and longest_run(~bad) == 2
     assert longest_run(np.ones(4, bool)) == 4 and longest_run(np.zeros(4, bool)) == 0
+
+
+def test_pictures_drawn_in_a_worker_process_are_the_same_bytes(phantom1_dir, monkeypatch):
+    """The report drawn with its design pictures in a second process (as `cpapfit design` does) is
+    the report drawn in one (a spawned worker: this test process already runs other threads)."""
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # the run date, to the minute, is on the page
+    scan = load_scan(phantom1_dir)
+    d = design(scan, "nasal")
+    files = design_files(d, scan)
+    alone = report_files(d, scan, files)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        assert report_files(d, scan, files, pool.submit) == alone
+
+
+def test_no_worker_is_forked_from_a_process_running_threads():
+    stop = threading.Event()
+    thread = threading.Thread(target=stop.wait)
+    thread.start()
+    try:
+        with picture_worker(True) as submit:
+            assert submit is at_once
+    finally:
+        stop.set()
+        thread.join()

@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 
 from ..pipeline import Design
-from ..report.assemble import Provenance, report_files as assemble_report
+from ..report.assemble import Provenance, at_once, report_files as assemble_report
 from ..scan import Scan
 
 
@@ -32,7 +32,8 @@ def run_date() -> str:
     return when.strftime("%Y-%m-%d %H:%M UTC")
 
 
-def report_files(d: Design, scan: Scan, files: dict[str, bytes]) -> dict[str, bytes]:
-    """The pictures and report.html of a design whose files (with fit.json) are `files`, as {name: bytes}."""
+def report_files(d: Design, scan: Scan, files: dict[str, bytes], submit=at_once) -> dict[str, bytes]:
+    """The pictures and report.html of a design whose files (with fit.json) are `files`, as {name: bytes};
+    `submit`: see `assemble.report_files`."""
     provenance = Provenance(scan.source, input_sha256(Path(scan.source)), run_date())
-    return assemble_report(d, scan, json.loads(files["fit.json"]), provenance)
+    return assemble_report(d, scan, json.loads(files["fit.json"]), provenance, submit)

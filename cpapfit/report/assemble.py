@@ -1,15 +1,19 @@
 """The report of a design as files: the pictures (PNG) and report.html, from the design, the
 scan, the fit.json record and, once evaluated, each cushion's rim pressure.
 
-Pure: the caller (cpapfit/io/report.py) supplies what comes from outside (input hash, date)."""
+Pure: the caller (cpapfit/io/report.py) supplies what comes from outside (input hash, date) and,
+optionally, a worker process that draws the design's own pictures meanwhile."""
 
+from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
 from matplotlib import colormaps
 
 from .. import __version__
-from ..pipeline import Design
+from ..align.nonrigid import Registration
+from ..contact import Contact
+from ..pipeline import Alignment, Design
 from ..scan import Scan
 from ..template import load_template
 from . import pictures as pic
@@ -101,15 +105,22 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
     ]
 
 
-def design_pictures(d: Design, face: Face, whole, close) -> list[Picture]:
+def at_once(fn, *args) -> Future:
+    """fn(*args) run here and now, as a finished future: the report drawn without a worker process."""
+    done = Future()
+    done.set_result(fn(*args))
+    return done
+
+
+def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, face: Face, whole, close) -> list[Picture]:
     """The scan understood: landmarks, registration residual, contact curve, cushion on the face."""
-    sim, reg = d.alignment.similarity, d.registration
+    sim = al.similarity
     res = reg.residual[reg.valid]
     return [
         Picture("scan_landmarks.png", "The scan and its landmarks",
                 "Landmarks found on the scan, coloured by how well each agrees with the others in the alignment "
                 "(green: agrees; red: rejected as wrong). They should sit on the eyes, nose, lips and face outline.",
-                pic.landmarks_picture(whole, d.alignment.landmarks)),
+                pic.landmarks_picture(whole, al.landmarks)),
         Picture("registration_residual.png", "The template on the scan",
                 "The template face warped onto the scan, coloured by its remaining distance to the scan; dark everywhere "
                 "means the face shape was captured. Grey: no scan data there (holes, hair, edges).",
@@ -118,26 +129,28 @@ def design_pictures(d: Design, face: Face, whole, close) -> list[Picture]:
         Picture("contact_curve.png", "Where the cushion touches the face",
                 "The seal line carried from the template onto this face. Red stretches have no scan data under them; "
                 "the cushion follows the template there.",
-                pic.contact_picture((whole, close), d.contact.curve, d.contact.on_scan)),
+                pic.contact_picture((whole, close), contact.curve, contact.on_scan)),
         Picture("cushion_on_face.png", "The custom cushion on the face",
                 "The printable cushion (blue) as designed on the scan.",
-                pic.cushion_picture(face, d.solid.vertices, d.solid.faces, sim)),
+                pic.cushion_picture(face, cushion.vertices, cushion.faces, sim)),
     ]
 
 
-def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance) -> dict[str, bytes]:
-    """The pictures and report.html of a design, as {name: bytes}."""
+def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submit=at_once) -> dict[str, bytes]:
+    """The pictures and report.html of a design, as {name: bytes}. `submit(fn, *args)` (a process
+    pool's, or `at_once`) draws the design's own pictures while this process draws the evaluation's."""
     sim, mask = d.alignment.similarity, d.contact.mask
     rims, window_kpa = evaluated_rims(d), d.fit_params.window_kpa
     face = scan_face(scan, d)
     whole = shoot(face, whole_face_view(sim))
     close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])))
-    pictures = design_pictures(d, face, whole, close) + gap_pictures(close, sim, mask, rims, fit)
-    pictures += pressure_pictures(close, sim, mask, rims, window_kpa, fit)
+    cushion = Face(d.solid.vertices, d.solid.faces)
+    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close)
+    later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     scale = pressure_scale(rims, window_kpa)
     values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}
     centre = np.mean(d.contact.curve, axis=0)
-    fig = viewer_figure(viewer_face(face, centre), Face(d.solid.vertices, d.solid.faces),
+    fig = viewer_figure(viewer_face(face, centre), cushion,
                         {n: (r.points, values[n]) for n, r in rims.items()}, scale, sim, d.cushion.axis)
     reg = d.registration
     notices = (landmark_notices(d.alignment.landmarks)
@@ -147,6 +160,7 @@ def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance) -> di
              ("input SHA-256", provenance.sha256), ("scan units", scan.units_note or scan.units),
              ("mask", mask), ("landmarks", f"{len(d.alignment.landmarks.points)} by {d.alignment.landmarks.path}"),
              ("cushion parameters", ", ".join(f"{k} {v:g}" for k, v in vars(d.cushion.params).items())))
+    pictures = early.result() + later
     page = Page(f"{mask.capitalize()} CPAP cushion for {provenance.source.rstrip('/').split('/')[-1]}", fit, tuple(notices),
                 tuple(pictures), trace, viewer_html(fig))
     return {**{p.name: p.png for p in pictures}, "report.html": report_html(page)}
