@@ -8,6 +8,7 @@ beside it and renamed into place; a run killed midway leaves only hidden folders
 """
 
 import contextlib
+import gc
 import hashlib
 import json
 import multiprocessing
@@ -26,7 +27,7 @@ from .errors import CpapfitError, InputError
 from .io import load_scan
 from .io.design import design_files
 from .io.report import report_files
-from .report.assemble import at_once
+from .work import at_once
 from .io.landmarks import read_landmarks
 from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files
@@ -60,13 +61,15 @@ class DesignRun:
 
 
 @contextlib.contextmanager
-def picture_worker(parallel: bool):
-    """`submit` for the report's pictures: a worker process forked now, while this process runs a
-    single thread (a fork copies only the calling thread: one taken after MediaPipe and Embree have
-    started theirs could hang in the child), or `at_once` when not parallel or not single-threaded."""
+def worker(parallel: bool):
+    """`submit` for work done alongside (`work.py`): a worker process forked now, while this process
+    runs a single thread (a fork copies only the calling thread: one taken after MediaPipe and
+    Embree have started theirs could hang in the child), or `at_once` when not parallel or not
+    single-threaded."""
     if not (parallel and _single_threaded()):
         yield at_once
         return
+    gc.freeze()  # the fork shares this memory: the collector's passes would otherwise copy every page of it
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         pool.submit(int).result()  # the fork, now
         yield pool.submit
@@ -85,11 +88,11 @@ def design_job(
     units: str = "auto", on_stage: Callable[[str], None] = _silent, parallel: bool = False,
 ) -> DesignRun:
     """`cpapfit design`: read the scan (and landmarks), design, build the report, write every file
-    atomically to `out_dir`. `parallel`: draw some report pictures in a second process (`picture_worker`)."""
-    with picture_worker(parallel) as submit:
+    atomically to `out_dir`. `parallel`: the mould and some report pictures made in a second process (`worker`)."""
+    with worker(parallel) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
-        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage)
+        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit)
         files = design_files(d, scan)
         on_stage("report")
         files |= report_files(d, scan, files, submit)

@@ -24,6 +24,7 @@ from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan, scan_surface
 from .template import load_template
+from .work import at_once
 
 # (stage, issue that builds it); order is the pipeline's.
 STAGES = (
@@ -103,11 +104,12 @@ def _silent(stage: str) -> None:
 
 def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
-    fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent,
+    fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom and
-    the generic cushion onto the face. `on_stage(name)` is called as each stage starts."""
+    the generic cushion onto the face. `on_stage(name)` is called as each stage starts; the mould
+    is made by `submit` (`work.py`), alongside the evaluation when that is a worker process's."""
     on_stage("landmarks and similarity")
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
@@ -121,14 +123,20 @@ def design(
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
-    on_stage("casting mould")
+    on_stage("pressure and leak, casting mould")
+    moulding = submit(checked_mould, cushion, solid)
+    fits = evaluate(face, al, solid, mask, params, fit_params)
+    moulded = moulding.result()
+    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan, face.scan), preload,
+                  moulded.parts, moulded.draft, fits, fit_params)
+
+
+def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):
+    """Stage mould: the casting mould of a cushion, every part checked closed."""
     moulded = mould(cushion, solid)
     for name, part in moulded.parts.items():
         check_closed(part, name)
-    on_stage("pressure and leak")
-    fits = evaluate(face, al, solid, mask, params, fit_params)
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan, face.scan), preload,
-                  moulded.parts, moulded.draft, fits, fit_params)
+    return moulded
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:

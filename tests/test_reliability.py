@@ -5,7 +5,10 @@ import contextlib
 import io
 import json
 import multiprocessing
+import os
 import socket
+import subprocess
+import sys
 import threading
 from concurrent.futures import ProcessPoolExecutor
 
@@ -16,9 +19,9 @@ from cpapfit.cli import main
 from cpapfit.io import load_scan
 from cpapfit.io.design import design_files
 from cpapfit.io.report import report_files
-from cpapfit.jobs import picture_worker
+from cpapfit.jobs import worker
 from cpapfit.pipeline import design
-from cpapfit.report.assemble import at_once
+from cpapfit.work import at_once
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.phantom import SensorModel, make_phantom, with_holes
@@ -54,10 +57,12 @@ def no_network(attempts: list):
 def twice(phantom1_dir, tmp_path_factory):
     """Seed 1 designed twice: normally, then with the network blocked. {"plain"|"offline": (code, stderr, folder)}, attempts."""
     runs, attempts = {}, []
-    for name in ("plain", "offline"):
-        out = tmp_path_factory.mktemp(name)
-        with no_network(attempts) if name == "offline" else contextlib.nullcontext():
-            runs[name] = (*run_design(phantom1_dir, "--out", out), out)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SOURCE_DATE_EPOCH", "1700000000")  # the run date, to the minute, is on the report
+        for name in ("plain", "offline"):
+            out = tmp_path_factory.mktemp(name)
+            with no_network(attempts) if name == "offline" else contextlib.nullcontext():
+                runs[name] = (*run_design(phantom1_dir, "--out", out), out)
     return runs, attempts
 
 
@@ -141,8 +146,20 @@ def test_no_worker_is_forked_from_a_process_running_threads():
     thread = threading.Thread(target=stop.wait)
     thread.start()
     try:
-        with picture_worker(True) as submit:
+        with worker(True) as submit:
             assert submit is at_once
     finally:
         stop.set()
         thread.join()
+
+
+def test_the_command_with_its_worker_process_gives_the_same_bytes(twice, phantom1_dir, tmp_path):
+    """`cpapfit design` as its own process (a fresh, single-threaded one: the mould and the design's
+    pictures are made in a forked worker) writes what the in-process runs wrote."""
+    env = {**os.environ, "SOURCE_DATE_EPOCH": "1700000000"}
+    subprocess.run([sys.executable, "-m", "cpapfit", "design", str(phantom1_dir), "--out", str(tmp_path), "--quiet"],
+                   check=True, env=env, capture_output=True)
+    _, _, out = twice[0]["plain"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in out.iterdir())
+    for p in out.iterdir():
+        assert (tmp_path / p.name).read_bytes() == p.read_bytes(), p.name

@@ -8,8 +8,9 @@ import os
 from pathlib import Path
 
 from ..pipeline import Design
-from ..report.assemble import Provenance, at_once, report_files as assemble_report
+from ..report.assemble import Provenance, report_files as assemble_report
 from ..scan import Scan
+from ..work import at_once
 
 
 def input_sha256(path: Path) -> str:

@@ -2,9 +2,8 @@
 scan, the fit.json record and, once evaluated, each cushion's rim pressure.
 
 Pure: the caller (cpapfit/io/report.py) supplies what comes from outside (input hash, date) and,
-optionally, a worker process that draws the design's own pictures meanwhile."""
+optionally, a worker process (`work.py`) that draws the design's own pictures meanwhile."""
 
-from concurrent.futures import Future
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +15,7 @@ from ..contact import Contact
 from ..pipeline import Alignment, Design
 from ..scan import Scan
 from ..template import load_template
+from ..work import at_once
 from . import pictures as pic
 from .advice import landmark_notices, fit_notices, scan_notices
 from .figure import ColourScale, zoned_cmap
@@ -103,13 +103,6 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
                 "Red: the rim does not touch the skin at the set headgear force, so air escapes there.",
                 pic.leak_picture(shot, {n: (a[0], a[2]) for n, a in arrays.items()}, leaks)),
     ]
-
-
-def at_once(fn, *args) -> Future:
-    """fn(*args) run here and now, as a finished future: the report drawn without a worker process."""
-    done = Future()
-    done.set_result(fn(*args))
-    return done
 
 
 def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, face: Face, whole, close) -> list[Picture]:
