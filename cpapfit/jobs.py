@@ -64,15 +64,25 @@ class DesignRun:
 def worker(parallel: bool):
     """`submit` for work done alongside (`work.py`): a worker process forked now, while this process
     runs a single thread (a fork copies only the calling thread: one taken after MediaPipe and
-    Embree have started theirs could hang in the child), or `at_once` when not parallel or not
-    single-threaded."""
-    if not (parallel and _single_threaded()):
+    Embree have started theirs could hang in the child), or `at_once` when not parallel, not
+    single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU)."""
+    if not (parallel and _single_threaded() and _idle_core()):
         yield at_once
         return
     gc.freeze()  # the fork shares this memory: the collector's passes would otherwise copy every page of it
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         pool.submit(int).result()  # the fork, now
         yield pool.submit
+
+
+def _idle_core() -> bool:
+    """True when fewer processes are running right now than there are cores (Linux's
+    /proc/loadavg, this one included); False where it cannot tell."""
+    try:
+        running = int(Path("/proc/loadavg").read_text().split()[3].split("/")[0])
+    except (OSError, IndexError, ValueError):
+        return False
+    return running < (os.cpu_count() or 1)
 
 
 def _single_threaded() -> bool:
