@@ -9,8 +9,8 @@ clearance on the other) register the halves.
 
 Demoulding (`draft.py`): each half is pulled straight off the parting plane, the core out along the
 mask axis through whichever opening leaves less undercut; the draft of each part's moulding surface
-(its faces that touch the cushion) is measured, not corrected: the cast silicone flexes over small
-undercuts, so they are reported for the caster.
+(its faces that touch the cushion) is measured, not corrected: undercuts are reported for the
+caster, and demoulding relies on the cured silicone flexing out of them.
 """
 
 from dataclasses import dataclass
@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import manifold3d as m3
 import numpy as np
 import trimesh
+from trimesh.ray.ray_util import contains_points
 
 from .cushion.nurbs import Cushion
 from .cushion.solid import sheet_faces
@@ -27,6 +28,7 @@ MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
 KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
 PROBE_MM = 0.01  # a part's face touches the cast when the cast is this far off it
+PROBE_RAYS = np.array([[0.4395, 0.6176, 0.6522], [-0.7071, 0.5, 0.5], [0.2673, -0.5345, 0.8018]])  # fixed: no random retries
 
 
 @dataclass(frozen=True)
@@ -105,9 +107,14 @@ def demoulding(parts: dict, cast: trimesh.Trimesh, side: np.ndarray, axis: np.nd
 
 
 def moulding_faces(part: trimesh.Trimesh, cast: trimesh.Trimesh) -> np.ndarray:
-    """(K, 3) the faces of a mould part that touch the cast: just off them, along their outward normal, is the cast."""
+    """(K, 3) the faces of a mould part that touch the cast: just off them, along their outward normal,
+    is the cast. Inside is where rays both ways along one of PROBE_RAYS cross the cast an odd number
+    of times (trimesh's `contains` would retry grazing rays in a random direction: not repeatable)."""
     probe = part.triangles_center + PROBE_MM * part.face_normals
-    return part.faces[cast.contains(probe)]
+    inside = np.zeros(len(probe), dtype=bool)
+    for direction in PROBE_RAYS:
+        inside |= contains_points(cast.ray, probe, check_direction=direction)
+    return part.faces[inside]
 
 
 def _least_undercut(part: trimesh.Trimesh, faces: np.ndarray, pulls: tuple) -> Draft:

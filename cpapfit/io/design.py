@@ -35,8 +35,8 @@ def mould_record(drafts: dict) -> dict:
     return {
         **{name: d.record() for name, d in drafts.items()},
         "draft_about": f"draft of each part's moulding surface along its pull direction; below {MIN_DRAFT_DEG:g} deg it drags, "
-                       "below 0 it is an undercut: measured, not removed (the silicone cast flexes over small undercuts; "
-                       "the parting plane is flat and the walls are not tapered)",
+                       "below 0 it is an undercut: measured, not removed (demoulding relies on the cured silicone flexing "
+                       "out of undercuts; the parting plane is flat and the walls are not tapered)",
     }
 
 
