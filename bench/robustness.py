@@ -6,7 +6,7 @@ region (both contact bands) lies within 1 mm (and, separately, 2 mm) mean of its
 Also counted: refused (with the gate or check that refused), flagged "rescan advised", and
 silently wrong (made, not flagged, mean error over 2 mm) -- the outcome a clinic must never get.
 
-Usage: .venv/bin/python bench/robustness.py [--seeds 5] [--first 100]
+Usage: .venv/bin/python bench/robustness.py [--seeds 5] [--first 100] [--workers 2]
 (seeds 100+ by default: the quality gates were calibrated on seeds 0-13.)
 """
 
@@ -15,14 +15,18 @@ import platform
 import tempfile
 import time
 from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from unittest.mock import patch
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from cpapfit.align.similarity import fit_similarity
 from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
+from cpapfit.landmarks.detect import Detection, detect_landmarks
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.metrics import mask_region
 from cpapfit.phantom import SensorModel, make_phantom, with_holes
@@ -32,10 +36,11 @@ from cpapfit.template import load_template
 
 REGION = mask_region(load_template())
 
-# (condition, level label, how the subject is made): subject(seed) -> (phantom, depth_scale factor, landmark noise mm)
+# (condition, level label, how the subject is made): subject(seed) -> (phantom, depth_scale factor, landmark noise mm[, user file])
 CONDITIONS = [
     ("clean", "-", lambda s: (make_phantom(s), 1.0, 0.0)),
-    *[("landmark noise sigma (mm)", f"{x:g}", lambda s, x=x: (make_phantom(s), 1.0, x)) for x in (1.0, 2.0, 5.0)],
+    *[("detected landmark noise sigma (mm)", f"{x:g}", lambda s, x=x: (make_phantom(s), 1.0, x)) for x in (1.0, 2.0, 5.0)],
+    ("user landmarks file, noise sigma (mm)", "2", lambda s: (make_phantom(s), 1.0, 2.0, True)),
     *[("holes over the mask region", f"{100 * x:.0f} %", lambda s, x=x: (with_holes(make_phantom(s), REGION, x, s), 1.0, 0.0))
       for x in (0.1, 0.3)],
     *[("sensor noise sigma at 500 mm (mm)", f"{x:g}", lambda s, x=x: (make_phantom(s, SensorModel(noise_mm_at_500=x)), 1.0, 0.0))
@@ -45,27 +50,50 @@ CONDITIONS = [
 ]
 
 
-def noisy_landmarks(scan, sigma: float, seed: int) -> Landmarks:
-    """The detected landmarks moved by Gaussian noise (sigma mm per axis) and put back on the skin
-    (nearest scan point), as a landmark detector's errors are: along the face, not off it."""
-    lm = align(scan).landmarks
-    moved = lm.points + np.random.default_rng(seed).normal(0.0, sigma, lm.points.shape)
-    on_skin = scan.vertices[cKDTree(scan.vertices).query(moved)[1]]
-    return Landmarks(on_skin, lm.template_index, lm.confidence, "user", f"detected + noise sigma {sigma} mm")
+def on_skin(scan, points: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """(K, 3) points moved by Gaussian noise (sigma mm per axis) and put back on the skin (nearest
+    scan point), as a landmark detector's or a user's errors are: along the face, not off it."""
+    moved = points + np.random.default_rng(seed).normal(0.0, sigma, points.shape)
+    return scan.vertices[cKDTree(scan.vertices).query(moved)[1]]
 
 
-def run(ph, scale: float, sigma: float, seed: int) -> dict:
-    """One design: outcome, mean mask-region error (mm) against the truth scaled as the scan is."""
+def noisy_detector(sigma: float, seed: int):
+    """`detect_landmarks` with noise added to what it finds; the similarity is refitted to them."""
+    def detect(scan, template):
+        found = detect_landmarks(scan, template)
+        if found is None:
+            return None
+        lm = found.landmarks
+        points = on_skin(scan, lm.points, sigma, seed)
+        fit = fit_similarity(template.vertices[lm.template_index], points)
+        return Detection(Landmarks(points, lm.template_index, fit.weights, lm.path, lm.note), fit, found.inliers)
+    return detect
+
+
+def run(seed: int, ph, scale: float, sigma: float, user: bool = False) -> dict:
+    """One design: outcome, mean mask-region error (mm) against the truth scaled as the scan is.
+    sigma: noise (mm) on the detected landmarks, or, with `user`, on a user's landmarks file."""
     with tempfile.TemporaryDirectory() as tmp:
         write_files(Path(tmp), capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale / scale))
         scan = load_capture(Path(tmp))
     try:
-        d = design(scan, "nasal", noisy_landmarks(scan, sigma, seed) if sigma else None)
+        if user:
+            lm = align(scan).landmarks
+            d = design(scan, "nasal", Landmarks(on_skin(scan, lm.points, sigma, seed), lm.template_index, lm.confidence, "user"))
+        else:
+            with patch("cpapfit.align.initial.detect_landmarks", noisy_detector(sigma, seed) if sigma else detect_landmarks):
+                d = design(scan, "nasal")
     except CpapfitError as exc:
         return {"outcome": "refused", "reason": f"{type(exc).__name__}: {str(exc).split(':')[0][:60]}", "message": str(exc)}
     err = float(np.linalg.norm(d.registration.vertices[REGION] - scale * ph.surface[REGION], axis=1).mean())
     flags = [g.code for g in assess_design(d, scan).flags]
     return {"outcome": "made", "err": err, "flags": flags}
+
+
+def one(job: tuple[int, int]) -> dict:
+    """The design of condition number `c` on subject `seed` (in a worker process)."""
+    c, seed = job
+    return run(seed, *CONDITIONS[c][2](seed))
 
 
 def summary(rows: list[dict]) -> str:
@@ -83,19 +111,19 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--first", type=int, default=100)
+    ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     seeds = range(args.first, args.first + args.seeds)
     print(f"machine: {platform.machine()}, Python {platform.python_version()}; seeds {seeds.start}-{seeds.stop - 1}, nasal mask")
     results, reasons, t0 = {}, defaultdict(int), time.perf_counter()
-    for condition, level, subject in CONDITIONS:
-        rows = []
-        for seed in seeds:
-            row = run(*subject(seed), seed)
-            rows.append(row)
+    jobs = [(c, seed) for c in range(len(CONDITIONS)) for seed in seeds]
+    with ProcessPoolExecutor(args.workers) as pool:
+        for (c, seed), row in zip(jobs, pool.map(one, jobs)):
+            condition, level, _ = CONDITIONS[c]
+            results.setdefault((condition, level), []).append(row)
             print(f"  {condition} {level} seed {seed}: {row}", flush=True)
             for code in row.get("flags", []) + ([row["reason"]] if "reason" in row else []):
                 reasons[code] += 1
-        results[(condition, level)] = rows
     print("\n| condition | level | n | success (1 mm) | success (2 mm) | refused | flagged | silently wrong | mean error (mm) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for (condition, level), rows in results.items():
