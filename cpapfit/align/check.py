@@ -4,7 +4,7 @@ Two measures over the template's central face, carried by the similarity onto th
 - gap: distance from each template point to the scan surface (point-to-plane at the nearest scan
   point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
 - nose: how far the scan rises at the nose tip above the scan 18 mm to either side of it and
-  20 mm below it (or 25, 30 mm where a hole leaves no data at 20), along the face's forward direction (a face: 10-25 mm and 12-25 mm; a sphere, a
+  20 mm below it (farther out where a hole leaves no data there), along the face's forward direction (a face: 10-25 mm and 12-25 mm; a sphere, a
   wall: a few mm; the edge of a box: a ridge, but nothing below).
 """
 
@@ -20,7 +20,7 @@ from .similarity import Similarity
 
 NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
 COVER_MM = 10.0
-RIDGE_OFFSET_MM = 18.0
+RIDGE_OFFSETS_MM = (18.0, 22.0, 26.0)  # probed in turn on each side: the first with scan data counts
 BELOW_OFFSETS_MM = (20.0, 25.0, 30.0)  # probed in turn: the first with scan data counts
 PEAK_SEARCH_MM = 15.0
 PROBE_MM = 4.0
@@ -84,8 +84,8 @@ def _peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> n
 
 def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity) -> tuple[float, float]:
     """How far the scan's nose tip (the peak near the aligned template's) stands out (mm, along the face's forward direction)
-    above the scan 18 mm to either side (those sides with data) and below it (the first of
-    BELOW_OFFSETS_MM with data)."""
+    above the scan to either side (those sides with data) and below it, each at the first of its
+    offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data."""
     lm = template.vertices
     forward, up = similarity.rotation[:, 2], similarity.rotation[:, 1]
     side = similarity.rotation @ (lm[LEFT_ALA] - lm[RIGHT_ALA])
@@ -101,11 +101,15 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
 
     tip = _peak(tree, scan, tip, forward)
     top = height(tip)
-    sides = np.array([height(tip + s * RIDGE_OFFSET_MM * side) for s in (-1.0, 1.0)])
+    sides = np.array([_first(height(tip + s * offset * side) for offset in RIDGE_OFFSETS_MM) for s in (-1.0, 1.0)])
     beside = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
-    lower = (height(tip - offset * up) for offset in BELOW_OFFSETS_MM)
-    below = top - next((h for h in lower if np.isfinite(h)), np.nan)
+    below = top - _first(height(tip - offset * up) for offset in BELOW_OFFSETS_MM)
     return tuple(float(x) if np.isfinite(x) else 0.0 for x in (beside, below))
+
+
+def _first(heights) -> float:
+    """The first finite of the heights (mm), NaN if none."""
+    return next((h for h in heights if np.isfinite(h)), np.nan)
 
 
 def require_face(check: FaceCheck, how: str) -> None:
