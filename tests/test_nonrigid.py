@@ -1,17 +1,14 @@
 """Non-rigid registration on synthetic subjects: fit, correspondence, holes, both lookup modes."""
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import trimesh
 
 from cpapfit.align.laplacian import laplacian
-from cpapfit.align.nonrigid import NonrigidParams, landmark_trust, register, vertex_normals
+from cpapfit.align.nonrigid import NonrigidParams, register, vertex_normals
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.landmarks.types import Landmarks
 from cpapfit.metrics import flipped_triangles, mask_region, scan_to_template
 from cpapfit.phantom import make_phantom
 from cpapfit.pipeline import align
@@ -66,15 +63,9 @@ def test_grid_and_kdtree_correspondences_agree(case):
     assert gap.mean() <= 0.2
 
 
-def test_detected_landmarks_lead_only_where_the_surface_cannot():
-    """A detected landmark pulls with a tenth of the paper's weight unless its vertex has no scan
-    pair and lies beyond the 5 mm pair gate from it; a user's landmarks always pull in full."""
-    params = NonrigidParams()
-    matched = np.array([True, True, False, False])
-    offsets = np.array([[0.0, 0.0, 1.0], [0.0, 6.0, 0.0], [0.0, 0.0, 1.0], [4.0, 0.0, 4.0]])
-    detected = Landmarks(np.zeros((4, 3)), np.arange(4), np.ones(4), "image")
-    assert landmark_trust(detected, matched, offsets, params).tolist() == [0.1, 0.1, 0.1, 1.0]
-    assert landmark_trust(replace(detected, path="user"), matched, offsets, params).tolist() == [1.0] * 4
+def test_detected_landmarks_pull_with_a_tenth_of_the_paper_weight(case):
+    log = case[3]["grid"].log
+    assert log[0].membrane == 100.0 and log[0].landmark == pytest.approx(1.0)
 
 
 def test_paper_mode_follows_the_paper_schedule(case):

@@ -4,10 +4,8 @@ Two additions to the paper, both switchable: the template first gets an affine s
 the face's proportions, so that the elastic stage finds only local shape), and detected landmarks
 (MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
 landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
-to ~1 mm -- except, at each stiffness level, those whose vertex has no scan pair and lies beyond
-the pair gate from them: the surface cannot lead that vertex, so the landmark does, in full (a
-face far from the template, as fran's lower face). A user's landmarks keep the paper's weight.
-With both off (`affine=None`, `detected_landmark_factor=1`) this is the paper's method.
+to ~1 mm; a user's landmarks keep the paper's weight. With both off (`affine=None`,
+`detected_landmark_factor=1`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
 (2) reject pairs > 5 mm apart, with normals > 25 deg apart, or on the scan's boundary;
@@ -117,11 +115,11 @@ def register(
     lap = laplacian(aligned, faces)
     start = _affine_start(aligned, vertex_normals(aligned, faces, vf), target, params)
     lm_index, lm_target = _landmark_targets(landmarks, params)
+    selector = np.zeros(len(aligned))
+    selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
-    mu, lam = params.membrane, params.landmark
-    m = match(target, start, vertex_normals(start, faces, vf), params.max_distance_mm, params.max_normal_deg)
-    lm_weights = _landmark_weights(len(aligned), lm_index, lam * landmark_trust(landmarks, m.valid[lm_index], lm_target - start[lm_index], params))
-    system = _System(w_data, lap, mu, lm_weights)
+    mu, lam = params.membrane, _landmark_weight(landmarks, params)
+    system = _System(w_data, lap, selector, mu, lam)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
@@ -131,7 +129,7 @@ def register(
         m = match(target, current, vertex_normals(current, faces, vf), params.max_distance_mm, params.max_normal_deg)
         pull = _data_targets(current, m, target, params)
         rhs = w_data * (pull - start)
-        rhs[lm_index] += lm_weights[lm_index, None] * (lm_target - start[lm_index])
+        rhs[lm_index] += lam * (lm_target - start[lm_index])
         new = system.solve(rhs)
         change = float(np.linalg.norm(new - disp) / max(np.linalg.norm(start + new - aligned), 1e-12))
         disp = new
@@ -142,30 +140,17 @@ def register(
                 break
             relaxed, at_level = relaxed + 1, 0
             mu, lam = mu * params.relax_factor, lam * params.relax_factor
-            lm_weights = _landmark_weights(len(aligned), lm_index, lam * landmark_trust(landmarks, m.valid[lm_index], lm_target - current[lm_index], params))
-            system.refactor(mu, lm_weights)
+            system.refactor(mu, lam)
     final = start + disp
     m = match(target, final, vertex_normals(final, faces, vf), params.max_distance_mm, params.max_normal_deg)
     residual = np.where(m.valid, _plane_distance(final, m, target), np.nan)
     return Registration(final, residual, m.valid, tuple(log))
 
 
-def landmark_trust(landmarks: Landmarks | None, matched: np.ndarray, offsets: np.ndarray, params: NonrigidParams) -> np.ndarray:
-    """(k,) factor on the landmark weight of each landmark, given (k,) whether its template vertex
-    has a scan pair now and (k, 3) offsets (mm) from that vertex to the landmark: 1 for a user's
-    landmarks, and for detected ones whose vertex has no pair and lies beyond the pair gate from
-    its landmark (the surface cannot lead it there); detected_landmark_factor for the others, whose
-    pull would be mostly the detector's error."""
+def _landmark_weight(landmarks: Landmarks | None, params: NonrigidParams) -> float:
+    """The landmark term's weight: the paper's for a user's landmarks, scaled for detected ones."""
     user = landmarks is None or landmarks.path == "user"
-    lost = ~matched & (np.linalg.norm(offsets, axis=1) > params.max_distance_mm)
-    return np.where(lost | user, 1.0, params.detected_landmark_factor)
-
-
-def _landmark_weights(n: int, index: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(n,) the landmark term's weight at each template vertex (0 where no landmark)."""
-    out = np.zeros(n)
-    out[index] = weights
-    return out
+    return params.landmark * (1.0 if user else params.detected_landmark_factor)
 
 
 def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, params: NonrigidParams) -> np.ndarray:
@@ -196,19 +181,18 @@ def _landmark_targets(landmarks: Landmarks | None, params: NonrigidParams):
 
 
 class _System:
-    """(w I + mu L + diag(landmark weights)) X = B for (n, 3) right-hand sides: a sparse LDL^T
-    factorisation (QDLDL) whose symbolic analysis is kept when the weights change (the sparsity
-    pattern does not)."""
+    """(w I + mu L + lam S) X = B for (n, 3) right-hand sides: a sparse LDL^T factorisation (QDLDL)
+    whose symbolic analysis is kept when mu and lam change (the sparsity pattern does not)."""
 
-    def __init__(self, w_data: float, lap, mu: float, lm_weights: np.ndarray):
-        self.w_data, self.lap = w_data, lap
-        self.solver = qdldl.Solver(self.matrix(mu, lm_weights))
+    def __init__(self, w_data: float, lap, selector: np.ndarray, mu: float, lam: float):
+        self.w_data, self.lap, self.selector = w_data, lap, selector
+        self.solver = qdldl.Solver(self.matrix(mu, lam))
 
-    def matrix(self, mu: float, lm_weights: np.ndarray):
-        return (diags(self.w_data + lm_weights) + mu * self.lap).tocsc()
+    def matrix(self, mu: float, lam: float):
+        return (diags(self.w_data + lam * self.selector) + mu * self.lap).tocsc()
 
-    def refactor(self, mu: float, lm_weights: np.ndarray) -> None:
-        self.solver.update(self.matrix(mu, lm_weights))
+    def refactor(self, mu: float, lam: float) -> None:
+        self.solver.update(self.matrix(mu, lam))
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """x, y and z solved side by side (QDLDL releases the GIL; each column is independent)."""
