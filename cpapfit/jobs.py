@@ -27,7 +27,6 @@ from .errors import CpapfitError, InputError
 from .io import load_scan
 from .io.design import design_files
 from .io.report import report_files
-from .work import at_once
 from .io.landmarks import read_landmarks
 from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files
@@ -35,6 +34,7 @@ from .landmarks.types import Landmarks
 from .pipeline import Design, design
 from .scan import Scan
 from .template import load_template
+from .work import at_once
 
 MANIFEST = "manifest.json"
 LEFTOVER = re.compile(r"^\..+\.(tmp|old)-\w+$")  # hidden staging names in OUT_DIR

@@ -4,8 +4,9 @@ Two measures over the template's central face, carried by the similarity onto th
 - gap: distance from each template point to the scan surface (point-to-plane at the nearest scan
   point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
 - nose: how far the scan rises at the nose tip above the scan 18 mm to either side of it and
-  20 mm below it (farther out where a hole leaves no data there), along the face's forward direction (a face: 10-25 mm and 12-25 mm; a sphere, a
-  wall: a few mm; the edge of a box: a ridge, but nothing below).
+  20 mm below it (farther out where a hole leaves no data there), along the face's forward
+  direction (a face: 10-25 mm and 12-25 mm; a sphere, a wall: a few mm; the edge of a box: a
+  ridge, but nothing below).
 """
 
 from dataclasses import dataclass

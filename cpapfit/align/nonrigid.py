@@ -111,9 +111,10 @@ def register(
     """Warp the similarity-aligned template (n, 3) mm onto the scan."""
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
-    target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, vertex_normals(aligned, faces, vf))
+    normals = vertex_normals(aligned, faces, vf)
+    target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
     lap = laplacian(aligned, faces)
-    start = _affine_start(aligned, vertex_normals(aligned, faces, vf), target, params)
+    start = _affine_start(aligned, normals, target, params)
     lm_index, lm_target = _landmark_targets(landmarks, params)
     selector = np.zeros(len(aligned))
     selector[lm_index] = 1.0
