@@ -2,10 +2,14 @@
 
 On the template, the region's centre curve (an edge path) is resampled evenly, smoothed, and
 stored as barycentric points on template triangles. Through the registration (same triangles,
-warped vertices) they land on the patient's face; each is then moved to the closest point of
-the scan itself where the scan has data within PROJECT_MM along the skin normal (at most
-TANGENT_MM sideways: near a hole the closest point is on the hole's rim, and the seal must not
-be dragged there), so the cushion touches the real face rather than the template's approximation of it.
+warped vertices) they land on the patient's face; each is then moved along the skin normal onto
+the scan itself where the scan has data within PROJECT_MM along that normal (a point over a hole
+stays: the seal must not be dragged to the hole's rim), so the cushion touches the real face
+rather than the template's approximation of it. For a point cloud, "along the normal" is its
+closest point at most TANGENT_MM sideways. "Onto the scan" means onto the skin the scan measures: a
+quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
+width SKIN_WIDTH_MM), so that the seal follows the face and not the sensor's noise or depth steps
+(a local moving-least-squares projection).
 """
 
 from dataclasses import dataclass
@@ -21,8 +25,10 @@ from .template import Template, load_template
 
 SAMPLES = 128  # points around the seal
 SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples
-PROJECT_MM = 3.0  # farther from the scan than this: no scan data there, keep the registered point
-TANGENT_MM = 1.0  # a closest scan point farther sideways than this is a hole's rim: keep the registered point
+PROJECT_MM = 10.0  # no scan within this along the skin normal: no data there, keep the registered point
+TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than this is a hole's rim
+SKIN_WIDTH_MM = 2.0  # Gaussian width of the local skin fit; scan points within twice this take part
+SKIN_MIN_POINTS = 12  # fewer scan points than this around a seal point (a sparse mesh): keep its closest point
 
 
 @dataclass(frozen=True)
@@ -81,14 +87,59 @@ def transfer_contact(template: Template, warped: np.ndarray, surface: trimesh.Tr
 
 
 def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
-    """Closest points of the scan's surface (`scan_surface`; its vertices, for a point cloud) within
-    PROJECT_MM of the (K, 3) points and within TANGENT_MM of their (K, 3) unit normals' lines."""
+    """The (K, 3) points moved along their (K, 3) unit normals onto the skin the scan measures
+    (`scan_surface`), and (K,) which moved: those with scan data within PROJECT_MM along the normal."""
     if isinstance(surface, trimesh.PointCloud):
-        dist, idx = cKDTree(surface.vertices).query(points)
-        closest = surface.vertices[idx]
+        hit, near = _closest_along(points, normals, surface.vertices)
+        sample = surface.vertices
     else:
-        closest, dist, _ = trimesh.proximity.closest_point(surface, points)
-    offset = closest - points
+        hit, near = _hit_along(points, normals, surface)
+        sample = surface.vertices[np.unique(surface.faces)]
+    skin = local_skin(hit, normals, np.asarray(sample))
+    return np.where(near[:, None], skin, points), near
+
+
+def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 3) the mesh's crossing of each point's normal line nearest the point, and (K,) whether
+    there is one within PROJECT_MM (where not, the point itself)."""
+    origins = points - PROJECT_MM * normals
+    where, ray, _ = mesh.ray.intersects_location(origins, normals, multiple_hits=True)
+    miss = np.abs(np.einsum("ij,ij->i", where - origins[ray], normals[ray]) - PROJECT_MM)
+    keep = miss <= PROJECT_MM
+    order = np.lexsort((miss[keep], ray[keep]))
+    ray, where = ray[keep][order], where[keep][order]
+    first = np.unique(ray, return_index=True)[1]
+    hit, near = points.copy(), np.zeros(len(points), dtype=bool)
+    hit[ray[first]], near[ray[first]] = where[first], True
+    return hit, near
+
+
+def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 3) each point's closest cloud point, and (K,) whether it lies within PROJECT_MM and within
+    TANGENT_MM of the point's normal line (farther sideways it is a hole's rim)."""
+    dist, idx = cKDTree(cloud).query(points)
+    offset = cloud[idx] - points
     sideways = np.linalg.norm(offset - np.einsum("ij,ij->i", offset, normals)[:, None] * normals, axis=1)
-    near = (dist <= PROJECT_MM) & (sideways <= TANGENT_MM)
-    return np.where(near[:, None], closest, points), near
+    return cloud[idx], (dist <= PROJECT_MM) & (sideways <= TANGENT_MM)
+
+
+def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray) -> np.ndarray:
+    """(K, 3) points moved along their (K, 3) unit normals onto a quadric height field fitted to the
+    (S, 3) scan points around each (Gaussian weights of width SKIN_WIDTH_MM); a point with fewer
+    than SKIN_MIN_POINTS scan points around it stays where it is. mm."""
+    out = points.copy()
+    tree = cKDTree(sample)
+    for k, around in enumerate(tree.query_ball_point(points, 2.0 * SKIN_WIDTH_MM)):
+        if len(around) >= SKIN_MIN_POINTS:
+            out[k] += _height(sample[around] - points[k], normals[k]) * normals[k]
+    return out
+
+
+def _height(offsets: np.ndarray, normal: np.ndarray) -> float:
+    """Height (mm, along the unit normal) at the origin of the quadric h(u, v) fitted to (S, 3) offsets."""
+    side = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    u, v, h = offsets @ side, offsets @ np.cross(normal, side), offsets @ normal
+    root_w = np.exp(-(u**2 + v**2) / (4.0 * SKIN_WIDTH_MM**2))
+    design = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v]) * root_w[:, None]
+    return float(np.linalg.lstsq(design, h * root_w, rcond=None)[0][0])

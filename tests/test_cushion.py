@@ -143,13 +143,18 @@ def test_self_intersections_are_found_and_designs_have_none(designed):
     assert all(self_intersecting_edges(part) == 0 for part in d.mould_parts.values())
 
 
+def grid_faces(n: int) -> np.ndarray:
+    """(2 (n-1)², 3) triangles of an n × n grid of points numbered row by row."""
+    corner = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
+    return np.concatenate([np.column_stack([corner, corner + 1, corner + n]), np.column_stack([corner + 1, corner + n + 1, corner + n])])
+
+
 def test_seal_points_over_a_hole_are_not_dragged_to_its_rim():
     """A flat scan (z = 0, 1 mm grid) with a hole of radius 6 mm; seal points 0.5 mm above it:
     those over data drop onto the scan, those over the hole stay (their closest point is its rim)."""
     n = 31
     xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
-    corner = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None, :]).ravel()
-    faces = np.concatenate([np.column_stack([corner, corner + 1, corner + n]), np.column_stack([corner + 1, corner + n + 1, corner + n])])
+    faces = grid_faces(n)
     vertices = np.column_stack([xy, np.zeros(len(xy))])
     faces = faces[(np.linalg.norm(xy[faces], axis=2) > 6.0).all(axis=1)]
     scan = Scan(vertices, faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
@@ -157,3 +162,34 @@ def test_seal_points_over_a_hole_are_not_dragged_to_its_rim():
     moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (4, 1)), scan_surface(scan))
     assert on_scan.tolist() == [False, False, True, True]
     assert np.allclose(moved[:2], points[:2]) and np.allclose(moved[2:], points[2:] - [0, 0, 0.5], atol=1e-9)
+
+
+def test_seal_points_land_on_the_skin_not_on_the_sensor_noise():
+    """A sphere of radius 80 mm seen as a 1 mm depth grid with σ 0.35 mm noise (a camera at 600 mm):
+    seal points land within 0.12 mm of the true sphere on average (closest scan points: 0.22 mm)."""
+    rng = np.random.default_rng(7)
+    n, radius = 41, 80.0
+    xy = np.stack(np.meshgrid(np.arange(n) - 20.0, np.arange(n) - 20.0), -1).reshape(-1, 2)
+    z = np.sqrt(radius**2 - (xy**2).sum(axis=1))
+    noisy = np.column_stack([xy, z + rng.normal(0.0, 0.35, len(z))])
+    faces = grid_faces(n)
+    surface = scan_surface(Scan(noisy, faces, np.tile([0.0, 0.0, 1.0], (len(noisy), 1))))
+    angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+    normals = np.column_stack([12 * np.cos(angle), 12 * np.sin(angle), np.full(64, 79.0)])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    moved, on_scan = onto_scan((radius + 0.5) * normals, normals, surface)
+    error = np.abs(np.linalg.norm(moved, axis=1) - radius)
+    assert on_scan.all()
+    assert error.mean() <= 0.12 and error.max() <= 0.4
+
+
+def test_seal_points_reach_a_scan_tilted_against_the_template():
+    """Where the registered template is 3 mm off a scan tilted 40° against its normal, the seal
+    point lands on the scan straight along its normal (its closest point lies 1.9 mm sideways)."""
+    n = 31
+    xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
+    faces = grid_faces(n)
+    surface = scan_surface(Scan(np.column_stack([xy, np.zeros(len(xy))]), faces, np.tile([0.0, 0.0, 1.0], (len(xy), 1))))
+    normal = np.array([[np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))]])
+    moved, on_scan = onto_scan(np.array([[2.0, 1.0, 0.0]]) + 3.0 * normal, normal, surface)
+    assert on_scan.all() and np.allclose(moved, [[2.0, 1.0, 0.0]], atol=1e-4)

@@ -1,0 +1,72 @@
+"""Issue 5's fit before compression: the cushion rim's gap to the scan where the scan has data
+(`Design.rim`), on synthetic subjects against both the scan and the subject's true skin, and the
+scan's own noise floor along the same rim: how far the true skin under the rim lies from the
+scan (a rim exactly on the skin would show that gap). Shared real scans: rim to scan only.
+
+Usage: .venv/bin/python bench/rim_gap.py [--seeds 8]   (prints a Markdown table)
+"""
+
+import argparse
+import platform
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from cpapfit.cushion.nurbs import CushionParams, design_cushion
+from cpapfit.io import load_scan
+from cpapfit.io.phantom import write_phantom
+from cpapfit.phantom import make_phantom
+from cpapfit.cushion.generic import NOSE_TIP
+from cpapfit.pipeline import design, face_for
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+SAMPLES = 256  # rim samples, as `pipeline.design` measures them
+
+
+def rim_points(scan, d) -> tuple[np.ndarray, trimesh.Trimesh]:
+    """(SAMPLES, 3) the neutral cushion's rim (before pre-load) and the scan surface, as in `design`."""
+    face = face_for(scan, d.alignment, d.registration)
+    neutral = design_cushion(d.contact, face.axis, face.up, d.registration.vertices[NOSE_TIP], CushionParams())
+    return neutral.grid(SAMPLES, 2)[:, 0], face.scan
+
+
+def stats(gap: np.ndarray) -> str:
+    return f"{np.median(gap):.3f} | {gap.max():.3f}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=8)
+    seeds = ap.parse_args().seeds
+    print(f"machine: {platform.machine()}, Python {platform.python_version()}; gaps in mm where the scan has data\n")
+    print("| scan | mask | rim to scan: median | max | rim to true skin: median | max | true skin to scan (floor): median | max |")
+    print("|---|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(1, seeds + 1):
+            ph = make_phantom(seed)
+            write_phantom(ph, Path(tmp) / str(seed))
+            scan = load_scan(Path(tmp) / str(seed))
+            truth = trimesh.Trimesh(ph.surface, ph.faces, process=False)
+            for mask in ("nasal", "oronasal"):
+                d = design(scan, mask)
+                rim, surface = rim_points(scan, d)
+                covered = d.rim.covered
+                on_skin, to_truth, _ = trimesh.proximity.closest_point(truth, rim)
+                floor = trimesh.proximity.closest_point(surface, on_skin)[1]
+                print(f"| phantom {seed} | {mask} | {stats(d.rim.gap[covered])} | {stats(to_truth[covered])} | "
+                      f"{stats(floor[covered])} |", flush=True)
+    for name in ("fran_cyberware/fran.obj", "rgbd_truedepth_mannequin"):
+        if (SHARED / name).exists():
+            for mask in ("nasal", "oronasal"):
+                try:
+                    d = design(load_scan(SHARED / name), mask)
+                except Exception as exc:  # a bench row, not a crash
+                    print(f"| {name.split('/')[0]} | {mask} | refused: {exc} |")
+                    continue
+                print(f"| {name.split('/')[0]} | {mask} | {stats(d.rim.gap[d.rim.covered])} | - | - | - | - |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
