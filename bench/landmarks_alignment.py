@@ -2,9 +2,11 @@
 
 For each seed: is a face found (and by which path), the mean 3-D error of the lifted landmarks
 against the true landmarks, and the similarity-aligned template's mean distance to the true
-surface over the mask region (both contact bands).
+surface over the mask region (both contact bands). With --render, each capture is first made a
+mesh scan (its triangles, with per-vertex colour or none) in a random orientation, so the render
+path finds the landmarks.
 
-Usage: .venv/bin/python bench/landmarks_alignment.py [--seeds 100]
+Usage: .venv/bin/python bench/landmarks_alignment.py [--seeds 100] [--render colour|plain]
 """
 
 import argparse
@@ -12,6 +14,7 @@ import platform
 import time
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from cpapfit.align.initial import initial_alignment
 from cpapfit.errors import CpapfitError
@@ -19,25 +22,39 @@ from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
 from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.phantom import make_phantom
+from cpapfit.scan import Scan
 from cpapfit.template import load_template
 
 
-def one(seed: int, template, region, tmp) -> dict:
+def as_mesh(capture: Scan, rotation: np.ndarray, colour: bool) -> Scan:
+    """A capture's triangles as a mesh scan turned by `rotation` (3, 3), with per-vertex colour or none."""
+    colors = None
+    if colour:
+        colors = np.zeros((len(capture.vertices), 3), dtype=np.uint8)
+        colors[capture.pixel_vertex[capture.valid]] = capture.image[capture.valid]
+    return Scan(capture.vertices @ rotation.T, capture.faces, capture.normals @ rotation.T, colors=colors)
+
+
+def one(seed: int, template, region, tmp, render: str | None = None) -> dict:
     ph = make_phantom(seed)
     folder = tmp / f"s{seed}"
     write_phantom(ph, folder)
     scan = load_capture(folder)
+    truth = ph.surface
+    if render:
+        rotation = Rotation.random(random_state=seed).as_matrix()
+        scan, truth = as_mesh(scan, rotation, render == "colour"), truth @ rotation.T
     t0 = time.perf_counter()
     try:
         lm, fit, _ = initial_alignment(scan, template)
     except CpapfitError as exc:
         return {"seed": seed, "found": False, "error": str(exc)}
     seconds = time.perf_counter() - t0
-    lm_err = np.linalg.norm(lm.points - ph.surface[lm.template_index], axis=1)
+    lm_err = np.linalg.norm(lm.points - truth[lm.template_index], axis=1)
     aligned = fit.apply(template.vertices[region])
-    dist = surface_distance(aligned, ph.surface, ph.faces)
+    dist = surface_distance(aligned, truth, ph.faces)
     return {
-        "seed": seed, "found": lm.path == "image", "path": lm.path, "landmarks": len(lm.points),
+        "seed": seed, "found": lm.path == ("render" if render else "image"), "path": lm.path, "landmarks": len(lm.points),
         "lm_err_mean": float(lm_err.mean()), "lm_err_inliers": float(lm_err[lm.confidence > 0.5].mean()),
         "region_mean": float(dist.mean()), "seconds": seconds, "yaw": ph.pose["yaw_deg"], "pitch": ph.pose["pitch_deg"],
     }
@@ -49,15 +66,16 @@ def main() -> None:
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=100)
+    ap.add_argument("--render", choices=("colour", "plain"), help="make each capture a mesh in a random orientation")
     args = ap.parse_args()
     template = load_template()
     region = mask_region(template)
     with tempfile.TemporaryDirectory() as tmp:
-        rows = [one(s, template, region, Path(tmp)) for s in range(args.seeds)]
+        rows = [one(s, template, region, Path(tmp), args.render) for s in range(args.seeds)]
     found = [r for r in rows if r["found"]]
     ok3 = [r for r in found if r["region_mean"] <= 3.0]
     print(f"machine: {platform.machine()}, {platform.python_version()}, seeds 0-{args.seeds - 1}")
-    print(f"landmarks found (image path): {len(found)}/{len(rows)} = {100 * len(found) / len(rows):.1f} %")
+    print(f"landmarks found ({'render' if args.render else 'image'} path): {len(found)}/{len(rows)} = {100 * len(found) / len(rows):.1f} %")
     for r in rows:
         if not r["found"]:
             print(f"  seed {r['seed']}: {r.get('path', '')} {r.get('error', '')}")
