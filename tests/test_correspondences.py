@@ -42,6 +42,6 @@ def test_fran_registers_onto_its_real_surface(shared_data):
     reg = register_template(scan, align(scan))
     region = mask_region(load_template())
     _, dist, _ = trimesh.proximity.closest_point(trimesh.Trimesh(scan.vertices, scan.faces, process=False), reg.vertices[region])
-    near = dist[dist < 3.0]  # the rest: fran's lower face, 6-10 mm off the template, which the
-    assert len(near) > 0.9 * len(dist)  # registration pulls in or not depending on the landmarks (2.6-10 % of the region)
+    near = dist[dist < 3.0]  # the rest is over holes and beyond the scan's edge
+    assert len(near) > 0.95 * len(dist)
     assert np.median(near) <= 0.15 and np.percentile(near, 95) <= 1.5
