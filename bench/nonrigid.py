@@ -43,7 +43,7 @@ def scan_to_template(scan, vertices):
     return metrics.scan_to_template(scan.vertices, vertices, TEMPLATE.faces, REGION)
 
 
-PAPER = NonrigidParams(affine=None, detected_landmark_factor=1.0)  # the paper's method, no additions
+PAPER = NonrigidParams(affine=None, detected_landmark_factor=1.0, coarse_gates=None)  # the paper's method, no additions
 
 
 def timed_register(aligned, scan, al, mode, params=NonrigidParams()):

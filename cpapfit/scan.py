@@ -73,6 +73,11 @@ class Scan:
         """True when the scan came from a depth image (grid correspondences possible)."""
         return self.depth is not None
 
+    @property
+    def is_mesh(self) -> bool:
+        """True for a triangle mesh not from a depth image (seen by rendering it)."""
+        return not self.is_capture and not self.is_point_cloud
+
 
 def scan_surface(scan: Scan) -> trimesh.Trimesh | trimesh.PointCloud:
     """The scan as trimesh sees it (its triangles, or its points for a point cloud). A design builds

@@ -87,6 +87,23 @@ def test_untextured_mesh_is_found_by_rendering(rotated_stl):
     assert region_error(fit, surface, faces) <= 3.0
 
 
+def test_a_mesh_is_seen_from_in_front_whatever_its_orientation(rotated_stl, tmp_path):
+    """The same bare mesh in two orientations between the axis views: the face is found on a render
+    from in front of it both times, and the template lands in the same place (seen obliquely from
+    axis views only, the two alignments were 2-7 mm apart)."""
+    path, surface, faces = rotated_stl
+    rot = Rotation.from_euler("zyx", [45, 45, 45], degrees=True).as_matrix()
+    other = tmp_path / "turned.stl"
+    trimesh.Trimesh(surface @ rot.T / 1000.0, faces).export(other)
+    placed = []
+    for scan_path, turn in ((path, np.eye(3)), (other, rot)):
+        lm, fit, _ = initial_alignment(load_scan(scan_path), TEMPLATE)
+        assert "frontal render" in lm.note
+        assert region_error(fit, surface @ turn.T, faces) <= 1.5
+        placed.append(fit.apply(TEMPLATE.vertices[REGION]) @ turn)  # back in the first mesh's frame
+    assert np.linalg.norm(placed[0] - placed[1], axis=1).mean() <= 1.0
+
+
 def test_user_landmarks_override_detection(rotated_stl, tmp_path, cli):
     path, surface, _ = rotated_stl
     idx = [1, 33, 263, 61, 291, 152, 10, 168]

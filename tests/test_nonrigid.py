@@ -13,6 +13,7 @@ from cpapfit.metrics import flipped_triangles, mask_region, scan_to_template
 from cpapfit.phantom import make_phantom
 from cpapfit.pipeline import align
 from cpapfit.rgbd import project
+from cpapfit.scan import Scan
 from cpapfit.template import load_template
 
 TEMPLATE = load_template()
@@ -72,7 +73,7 @@ def test_paper_mode_follows_the_paper_schedule(case):
     """Without the affine start and with full landmark weight: the paper's weights, halved."""
     _, scan, aligned, _ = case
     al = align(scan)
-    log = register(aligned, TEMPLATE.faces, scan, al.landmarks, NonrigidParams(affine=None, detected_landmark_factor=1.0)).log
+    log = register(aligned, TEMPLATE.faces, scan, al.landmarks, NonrigidParams(affine=None, detected_landmark_factor=1.0, coarse_gates=None)).log
     assert log[0].membrane == 100.0 and log[0].landmark == 10.0
     halved = [b for a, b in zip(log, log[1:]) if b.membrane < a.membrane]
     assert all(b.membrane == pytest.approx(a.membrane / 2) for a, b in zip(log, log[1:]) if b.membrane < a.membrane)
@@ -138,3 +139,22 @@ def test_shared_real_scans_register(shared_data, name, cli, tmp_path):
     mesh, residual, valid = read_ply_attributes(tmp_path / "reg.ply")
     assert np.median(residual[valid == 1]) < 0.5  # mm
     assert 100 < np.ptp(mesh.vertices, axis=0).max() < 250  # fran in metres comes out in mm
+
+
+def test_a_chin_far_from_the_template_is_pulled_in():
+    """The template's own surface with everything below the lower lip pushed 12 mm forward over a
+    10 mm ramp (the chin far and tilted, as fran's is): the paper's 5 mm / 25 deg gates leave it
+    out (~7 mm off); the coarse gates bring it onto the scan."""
+    v = TEMPLATE.vertices.copy()
+    lip = v[14, 1]  # Face Mesh 14: the lower lip
+    t = np.clip((lip - v[:, 1]) / 10.0, 0.0, 1.0)
+    v[:, 2] += 12.0 * t * t * (3 - 2 * t)
+    mesh = trimesh.Trimesh(v, TEMPLATE.faces, process=False)
+    scan = Scan(v, TEMPLATE.faces, mesh.vertex_normals.copy())
+    below = REGION[TEMPLATE.vertices[REGION, 1] < lip]
+    off = {}
+    for gates in (None, NonrigidParams().coarse_gates):
+        reg = register(TEMPLATE.vertices, TEMPLATE.faces, scan, None, NonrigidParams(coarse_gates=gates))
+        off[gates] = trimesh.proximity.closest_point(mesh, reg.vertices[below])[1]
+    assert off[None].mean() > 3.0  # what the paper's gates do here
+    assert off[NonrigidParams().coarse_gates].mean() <= 0.5 and np.percentile(off[NonrigidParams().coarse_gates], 95) <= 1.0

@@ -1,14 +1,17 @@
 """Non-rigid registration: the paper's elastic ICP of the similarity-aligned template onto the scan.
 
-Two additions to the paper, both switchable: the template first gets an affine start (align/affine.py:
-the face's proportions, so that the elastic stage finds only local shape), and detected landmarks
+Three additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
+the face's proportions, so that the elastic stage finds only local shape); detected landmarks
 (MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
 landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
-to ~1 mm; a user's landmarks keep the paper's weight. With both off (`affine=None`,
-`detected_landmark_factor=1`) this is the paper's method.
+to ~1 mm (a user's landmarks keep the paper's weight); and coarse gates: at the stiffest level pairs
+up to 15 mm and 60 deg apart are kept, the gates narrowing with the stiffness (halved with it) to
+the paper's 5 mm and 25 deg, so that a part of the face far from the template (a chin 6-10 mm
+off and tilted) is pulled in while the membrane is stiff instead of being left out. With all three
+off (`affine=None`, `detected_landmark_factor=1`, `coarse_gates=None`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
-(2) reject pairs > 5 mm apart, with normals > 25 deg apart, or on the scan's boundary;
+(2) reject pairs > 5 mm apart, with normals > 25 deg apart (coarse gates: wider while stiff), or on the scan's boundary;
 (3) solve for the displacement field D (from V0, the similarity-aligned template after the affine start) minimising
 
     0.1 * sum |V0 + D - c|^2 + 1 * sum (n_c . (V0 + D - c))^2 + 100 * D^T L D + 10 * sum_k |V0_k + D_k - r_k|^2
@@ -60,6 +63,7 @@ class NonrigidParams:
     min_landmark_confidence: float = 0.5
     detected_landmark_factor: float = 0.1
     affine: AffineParams | None = AffineParams()
+    coarse_gates: tuple[float, float] | None = (15.0, 60.0)
 
 
 @dataclass(frozen=True)
@@ -127,7 +131,7 @@ def register(
     for it in range(1, params.max_iterations + 1):
         at_level += 1
         current = start + disp
-        m = match(target, current, vertex_normals(current, faces, vf), params.max_distance_mm, params.max_normal_deg)
+        m = match(target, current, vertex_normals(current, faces, vf), *_gates(params, mu))
         pull = _data_targets(current, m, target, params)
         rhs = w_data * (pull - start)
         rhs[lm_index] += lam * (lm_target - start[lm_index])
@@ -146,6 +150,15 @@ def register(
     m = match(target, final, vertex_normals(final, faces, vf), params.max_distance_mm, params.max_normal_deg)
     residual = np.where(m.valid, _plane_distance(final, m, target), np.nan)
     return Registration(final, residual, m.valid, tuple(log))
+
+
+def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
+    """The pair rejection (max distance mm, max normal angle deg) at membrane weight mu: the paper's,
+    or with coarse_gates, those at the stiffest level narrowing with the stiffness to the paper's."""
+    if params.coarse_gates is None:
+        return params.max_distance_mm, params.max_normal_deg
+    stiffness = mu / params.membrane
+    return max(params.max_distance_mm, params.coarse_gates[0] * stiffness), max(params.max_normal_deg, params.coarse_gates[1] * stiffness)
 
 
 def _landmark_weight(landmarks: Landmarks | None, params: NonrigidParams) -> float:

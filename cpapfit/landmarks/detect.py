@@ -3,7 +3,10 @@
 Every detection (each view, each of four image rotations, each face found) is lifted to 3-D and
 scored by how well a robust similarity carries the template's landmarks onto it; the best one
 that faces its camera wins. Landmarks on the far side of the head (template normal turned away
-from the camera) are dropped before the final fit.
+from the camera) are dropped before the final fit. On a mesh the winner is then refined: the
+mesh is rendered from straight in front of the face it found, upright and filling the image, and
+a detection there replaces it (an axis view of a scan in an arbitrary orientation sees the face
+obliquely, and MediaPipe's landmarks on an oblique face are off by millimetres).
 """
 
 from dataclasses import dataclass
@@ -18,11 +21,12 @@ from ..template import N_LANDMARKS, Template
 from .facemesh import detect_rotations
 from .lift import lift
 from .types import Landmarks
-from .views import axis_views, render_view
+from .views import axis_views, face_view, render_view
 
 MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
 MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the similarity
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
+FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
 TWO_FACES_APART = 0.5  # two detections whose centres are farther apart than this x face size are two faces
 
 
@@ -58,23 +62,47 @@ def sights(scan: Scan) -> list[Sight]:
 
 
 def detect_landmarks(scan: Scan, template: Template) -> Detection | None:
-    """The best detection over every sight and rotation, or None when no face is found."""
+    """The best detection over every sight and rotation (for a mesh, refined from in front of the
+    face), or None when no face is found."""
     path = "image" if scan.is_capture else "render"
+    best = _best(sights(scan), template, path)
+    if best is not None and path == "render":
+        best = detect_from_front(scan, template, best.similarity) or best
+    return None if best is None else _as_found_by(best, path)
+
+
+def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detection | None:
+    """Detection on renders of a mesh scan from straight in front of the template placed by `pose`
+    (FRONTAL_PASSES times, each from the last detection's pose), or None if none is found."""
+    best = None
+    for _ in range(FRONTAL_PASSES):
+        view = face_view(pose.apply(template.landmarks), pose.rotation[:, 2], pose.rotation[:, 1])
+        image, depth = render_view(scan, view)
+        found = _best([Sight(image, depth, view.intrinsics, view.to_scan, "frontal render")], template, "render")
+        if found is None:
+            break
+        best, pose = _as_found_by(found, "render"), found.similarity
+    return best
+
+
+def _as_found_by(det: Detection, path: str) -> Detection:
+    """The detection with its landmarks labelled as found by `path` ("image" or "render")."""
+    lm = det.landmarks
+    return Detection(Landmarks(lm.points, lm.template_index, lm.confidence, path, lm.note), det.similarity, det.inliers)
+
+
+def _best(seen: list[Sight], template: Template, path: str) -> Detection | None:
+    """The detection with the least similarity RMS over the sights and image rotations, or None."""
     best = None
     normals = template.mesh().vertex_normals[:N_LANDMARKS]
-    for sight in sights(scan):
+    for sight in seen:
         for k, faces in detect_rotations(sight.image):
             _refuse_two_faces(faces, sight)
             for uv in faces:
                 det = _evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg")
                 if det is not None and (best is None or det.similarity.rms_mm < best.similarity.rms_mm):
                     best = det
-    if best is None:
-        return None
-    return Detection(
-        Landmarks(best.landmarks.points, best.landmarks.template_index, best.landmarks.confidence, path, best.landmarks.note),
-        best.similarity, best.inliers,
-    )
+    return best
 
 
 def _refuse_two_faces(faces: list[np.ndarray], sight: Sight) -> None:

@@ -1,5 +1,6 @@
 """Offscreen views of a mesh scan for landmark detection: the frontal direction is not known, so
-the mesh is rendered from the six axis directions (detection also tries four image rotations).
+the mesh is rendered from the six axis directions (detection also tries four image rotations);
+once a face is found, it is rendered again from straight in front, upright and filling the view.
 """
 
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ SIZE = (640, 480)
 SKIN = np.array([0.85, 0.68, 0.58])
 VIEW_DISTANCE = 3.0  # camera distance in scan extents (mild perspective)
 FILL = 0.85  # fraction of the image height the scan's extent fills
+FACE_EXTENT = 1.5  # the frontal view frames this many times the landmarks' extent
 
 
 @dataclass(frozen=True)
@@ -44,10 +46,24 @@ def axis_views(scan: Scan) -> list[View]:
     """Six views looking at the scan's centre along +-x, +-y, +-z of the scan frame."""
     centre = np.median(scan.vertices, axis=0)
     extent = float(np.ptp(scan.vertices, axis=0).max())
+    return [_view(_look_along(sign * axis), centre, extent) for axis in np.eye(3) for sign in (1.0, -1.0)]
+
+
+def face_view(points: np.ndarray, axis: np.ndarray, up: np.ndarray) -> View:
+    """The view from straight in front of a face: looking against its unit `axis` (out of the
+    face), head `up` at the top of the image, framing the (K, 3) landmark points (mm)."""
+    z = -axis / np.linalg.norm(axis)
+    y = -(up - (up @ z) * z)
+    y /= np.linalg.norm(y)
+    extent = FACE_EXTENT * float(np.ptp(points, axis=0).max())
+    return _view(np.stack([np.cross(y, z), y, z]), points.mean(axis=0), extent)
+
+
+def _view(rotation: np.ndarray, centre: np.ndarray, extent: float) -> View:
+    """A camera VIEW_DISTANCE extents from `centre`, the extent (mm) filling FILL of the image height."""
     distance = VIEW_DISTANCE * extent
     f = FILL * SIZE[1] * distance / extent
-    intr = Intrinsics(SIZE[0], SIZE[1], f, f, (SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2)
-    return [View(_look_along(sign * axis), centre, distance, intr) for axis in np.eye(3) for sign in (1.0, -1.0)]
+    return View(rotation, centre, distance, Intrinsics(SIZE[0], SIZE[1], f, f, (SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2))
 
 
 def render_view(scan: Scan, view: View) -> tuple[np.ndarray, np.ndarray]:
