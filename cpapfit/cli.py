@@ -86,10 +86,11 @@ def cmd_register(args) -> int:
 def design_summary(fit: dict) -> str:
     """One line on a designed cushion, from its fit.json record."""
     dims, rim = fit["cushion"], fit["fit_before_compression"]
+    gap = ("no scan data under the rim" if rim["rim_gap_median_mm"] is None else
+           f"median {rim['rim_gap_median_mm']:.2f} mm, max {rim['rim_gap_max_mm']:.2f} mm")
     return (
         f"{fit['mask']} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
-        f"watertight, thinnest wall {dims['min_wall_mm']:.2f} mm, rim-to-skin gap before pre-load median "
-        f"{rim['rim_gap_median_mm']:.2f} mm, max {rim['rim_gap_max_mm']:.2f} mm"
+        f"watertight, thinnest wall {dims['min_wall_mm']:.2f} mm, rim-to-skin gap before pre-load {gap}"
     )
 
 

@@ -157,3 +157,10 @@ def test_evaluate_refuses_bad_cushions_and_options_before_any_work(cli, tmp_path
 def test_an_output_folder_that_is_a_file_is_one_line(cli, tmp_path):
     (tmp_path / "taken").write_text("not a folder")
     assert_one_line_error(*cli("phantom", "--seed", "1", "--out", tmp_path / "taken" / "sub"), "taken")
+
+
+def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
+    from cpapfit.cli import design_summary
+    fit = {"mask": "nasal", "cushion": {"width_mm": 52.0, "height_mm": 50.0, "depth_mm": 40.0, "min_wall_mm": 2.01},
+           "fit_before_compression": {"rim_gap_median_mm": None, "rim_gap_max_mm": None, "rim_covered_fraction": 0.0}}
+    assert design_summary(fit).endswith("rim-to-skin gap before pre-load no scan data under the rim")
