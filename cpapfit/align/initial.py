@@ -1,5 +1,7 @@
 """Initial alignment of the template on a scan: landmarks (user, detected, or none) and a similarity."""
 
+from typing import Iterator
+
 from ..scan import Scan
 from ..template import Template, central_face
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
@@ -12,27 +14,33 @@ from .similarity import Similarity, fit_similarity
 def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
     """Landmarks, the similarity carrying the template onto the scan, and the face check.
 
-    User landmarks override detection; without a detected face (on a mesh: or with one that does
-    not lie on a face) the landmark-free fallback is used, and on a mesh a detection on a render
-    from in front of the face it found replaces it. Any result that does not lie on a face is
-    refused (InputError)."""
+    User landmarks override detection. Otherwise the first of these that lies on a face wins: the
+    detection; without one (on a mesh: or if it fails the face check), a detection on a render
+    from in front of the face the landmark-free fallback finds (meshes), then the fallback itself.
+    If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
     if user is not None:
         fit = fit_similarity(template.vertices[user.template_index], user.points)
-        landmarks = Landmarks(user.points, user.template_index, fit.weights, "user", "user landmarks file")
+        candidates = [Detection(Landmarks(user.points, user.template_index, fit.weights, "user", "user landmarks file"), fit, len(user.points))]
     else:
-        detection = detect_landmarks(scan, template)
-        retry = detection is not None and scan.is_mesh and not check_face(scan, template, detection.similarity, central).is_face
-        if detection is None or retry:
-            detection = _without_landmarks(scan, template)
-        landmarks, fit = detection.landmarks, detection.similarity
-    check = check_face(scan, template, fit, central)
-    require_face(check, f"landmarks by {landmarks.path}")
-    return landmarks, fit, check
+        candidates = _candidates(scan, template)
+    for found in candidates:
+        check = check_face(scan, template, found.similarity, central)
+        if check.is_face:
+            break
+    require_face(check, f"landmarks by {found.landmarks.path}")
+    return found.landmarks, found.similarity, check
 
 
-def _without_landmarks(scan: Scan, template: Template) -> Detection:
-    """The landmark-free fallback's alignment, or on a mesh the detection from in front of it."""
+def _candidates(scan: Scan, template: Template) -> Iterator[Detection]:
+    """Alignments to try in turn (each computed only if the one before fails the face check)."""
+    detection = detect_landmarks(scan, template)
+    if detection is not None:
+        yield detection
+        if not scan.is_mesh:  # a capture's own image is the best view there is
+            return
     landmarks, fit = fallback_alignment(scan, template)
     front = detect_from_front(scan, template, fit) if scan.is_mesh else None
-    return front or Detection(landmarks, fit, len(landmarks.points))
+    if front is not None:
+        yield front
+    yield Detection(landmarks, fit, len(landmarks.points))

@@ -78,7 +78,7 @@ def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detec
     for _ in range(FRONTAL_PASSES):
         view = face_view(pose.apply(template.landmarks), pose.rotation[:, 2], pose.rotation[:, 1])
         image, depth = render_view(scan, view)
-        found = _best([Sight(image, depth, view.intrinsics, view.to_scan, "frontal render")], template, "render")
+        found = _best([Sight(image, depth, view.intrinsics, view.to_scan, "frontal render")], template, "render", one_face=False)
         if found is None:
             break
         best, pose = _as_found_by(found, "render"), found.similarity
@@ -91,13 +91,15 @@ def _as_found_by(det: Detection, path: str) -> Detection:
     return Detection(Landmarks(lm.points, lm.template_index, lm.confidence, path, lm.note), det.similarity, det.inliers)
 
 
-def _best(seen: list[Sight], template: Template, path: str) -> Detection | None:
-    """The detection with the least similarity RMS over the sights and image rotations, or None."""
+def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True) -> Detection | None:
+    """The detection with the least similarity RMS over the sights and image rotations, or None.
+    `one_face`: refuse sights showing two faces (a frontal render frames one face only: skipped)."""
     best = None
     normals = template.mesh().vertex_normals[:N_LANDMARKS]
     for sight in seen:
         for k, faces in detect_rotations(sight.image):
-            _refuse_two_faces(faces, sight)
+            if one_face:
+                _refuse_two_faces(faces, sight)
             for uv in faces:
                 det = _evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg")
                 if det is not None and (best is None or det.similarity.rms_mm < best.similarity.rms_mm):
