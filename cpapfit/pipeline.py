@@ -17,7 +17,7 @@ from .cushion.generic import NOSE_TIP, place, template_cushion
 from .compensation import Preload, compensated_cushion
 from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
-from .export import check_closed, check_solid
+from .export import SolidError, check_closed, check_solid, self_intersecting_edges
 from .mould import mould
 from .quality import assess, require_quality
 from .align.similarity import Similarity
@@ -122,7 +122,7 @@ def design(
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
-    checks = check_solid(solid, wall, params.wall_mm, f"the {mask} cushion")
+    checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould")
     moulding = submit(checked_mould, cushion, solid)
     fits = evaluate(face, al, solid, mask, params, fit_params)
@@ -137,6 +137,22 @@ def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):
     for name, part in moulded.parts.items():
         check_closed(part, name)
     return moulded
+
+
+def _checked(solid: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name: str, landmarks_path: str) -> dict:
+    """`check_solid` of a custom cushion; a cushion crossing itself comes from a seal curve that
+    crosses itself, which a well-placed template does not carry: the refusal says what to do."""
+    try:
+        return check_solid(solid, wall_mm, min_wall_mm, name)
+    except SolidError:
+        crossings = self_intersecting_edges(solid)
+        if not crossings:
+            raise
+        raise SolidError(
+            f"{name} would cross itself ({crossings} self-intersecting edges): the seal curve carried onto this scan is "
+            f"twisted, which a well-placed template does not give (landmarks by {landmarks_path}); give landmarks with "
+            "--landmarks, or rescan facing the camera; nothing was written"
+        ) from None
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:

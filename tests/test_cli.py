@@ -164,3 +164,24 @@ def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
     fit = {"mask": "nasal", "cushion": {"width_mm": 52.0, "height_mm": 50.0, "depth_mm": 40.0, "min_wall_mm": 2.01},
            "fit_before_compression": {"rim_gap_median_mm": None, "rim_gap_max_mm": None, "rim_covered_fraction": 0.0}}
     assert design_summary(fit).endswith("rim-to-skin gap before pre-load no scan data under the rim")
+
+
+def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, monkeypatch):
+    """A seal curve that crosses itself (two opposite stretches swapped, as a misplaced template
+    can carry) makes a cushion crossing itself: refused, saying so and what to do, nothing written."""
+    import dataclasses
+
+    import cpapfit.pipeline as pipeline
+
+    real = pipeline.transfer_contact
+
+    def twisted(*args):
+        contact = real(*args)
+        n = len(contact.curve)
+        order = np.r_[n // 2: n // 2 + n // 8, n // 8: n // 2, 0: n // 8, n // 2 + n // 8: n]
+        return dataclasses.replace(contact, curve=contact.curve[order], normals=contact.normals[order], on_scan=contact.on_scan[order])
+
+    monkeypatch.setattr(pipeline, "transfer_contact", twisted)
+    out = tmp_path / "out"
+    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "cross itself", "--landmarks")
+    assert not out.exists() or not any(out.iterdir())
