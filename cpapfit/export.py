@@ -16,7 +16,11 @@ EDGE_CLEARANCE_MM = 1e-3  # a segment hitting a triangle nearer its edge than th
 
 
 class SolidError(CpapfitError):
-    """A designed solid failed a printability check: nothing is written."""
+    """A designed solid failed a printability check: nothing is written. `found`: the measured values."""
+
+    def __init__(self, message: str, found: dict | None = None):
+        super().__init__(message)
+        self.found = found or {}
 
 
 def check_closed(mesh: trimesh.Trimesh, name: str) -> dict:
@@ -29,7 +33,7 @@ def check_closed(mesh: trimesh.Trimesh, name: str) -> dict:
     }
     if not (found["watertight"] and found["winding_consistent"] and m.status() == manifold3d.Error.NoError
             and found["volume_mm3"] > 0 and found["self_intersecting_edges"] == 0):
-        raise SolidError(f"{name} is not a clean closed solid ({found}); nothing was written")
+        raise SolidError(f"{name} is not a clean closed solid ({found}); nothing was written", found)
     return found
 
 
@@ -37,7 +41,7 @@ def check_solid(mesh: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name:
     """`check_closed`, and the measured thinnest wall `wall_mm` at least WALL_TOLERANCE of `min_wall_mm`."""
     found = check_closed(mesh, name) | {"min_wall_mm": float(wall_mm)}
     if wall_mm < WALL_TOLERANCE * min_wall_mm:
-        raise SolidError(f"{name} fails the printability checks ({found}); nothing was written")
+        raise SolidError(f"{name} fails the printability checks ({found}); nothing was written", found)
     return found
 
 

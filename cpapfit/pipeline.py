@@ -17,7 +17,7 @@ from .cushion.generic import NOSE_TIP, place, template_cushion
 from .compensation import Preload, compensated_cushion
 from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
-from .export import SolidError, check_closed, check_solid, self_intersecting_edges
+from .export import SolidError, check_closed, check_solid
 from .mould import mould
 from .quality import assess, require_quality
 from .align.similarity import Similarity
@@ -144,8 +144,8 @@ def _checked(solid: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name: s
     crosses itself, which a well-placed template does not carry: the refusal says what to do."""
     try:
         return check_solid(solid, wall_mm, min_wall_mm, name)
-    except SolidError:
-        crossings = self_intersecting_edges(solid)
+    except SolidError as exc:
+        crossings = exc.found.get("self_intersecting_edges", 0)
         if not crossings:
             raise
         raise SolidError(
