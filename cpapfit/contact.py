@@ -9,7 +9,10 @@ rather than the template's approximation of it. For a point cloud, "along the no
 closest point at most TANGENT_MM sideways. "Onto the scan" means onto the skin the scan measures: a
 quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
 width SKIN_WIDTH_MM), so that the seal follows the face and not the sensor's noise or depth steps
-(a local moving-least-squares projection).
+(a local moving-least-squares projection). Where the scan has no data the seal keeps the registered
+template's guess, but not with a step at the data's edge: the offset the last scanned points took
+(scan minus template, along the normal) carries on into the gap and fades away over ~FADE_MM of
+seal; across a short hole it runs from one edge's offset to the other's.
 """
 
 from dataclasses import dataclass
@@ -28,6 +31,7 @@ SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples
 PROJECT_MM = 10.0  # no scan within this along the skin normal: no data there, keep the registered point
 TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than this is a hole's rim
 SKIN_WIDTH_MM = 2.0  # Gaussian width of the local skin fit; scan points within twice this take part
+FADE_MM = 10.0  # arc length over which the scan's offset fades into a gap in the data
 SKIN_MIN_POINTS = 12  # fewer scan points than this around a seal point (a sparse mesh): keep its closest point
 
 
@@ -82,7 +86,9 @@ def transfer_contact(template: Template, warped: np.ndarray, surface: trimesh.Tr
     carried = np.einsum("kj,kjc->kc", bary, corners)
     normals = np.einsum("kj,kjc->kc", bary, trimesh.Trimesh(warped, template.faces, process=False).vertex_normals[template.faces[tri]])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    curve, on_scan = onto_scan(carried, normals, surface)
+    moved, on_scan = onto_scan(carried, normals, surface)
+    fade = faded_offsets(carried, np.einsum("ij,ij->i", moved - carried, normals), on_scan)
+    curve = np.where(on_scan[:, None], moved, carried + fade[:, None] * normals)
     return Contact(mask, curve, normals, on_scan, warped[template.regions[mask].band])
 
 
@@ -97,6 +103,25 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
         sample = surface.vertices[np.unique(surface.faces)]
     skin = local_skin(hit, normals, np.asarray(sample))
     return np.where(near[:, None], skin, points), near
+
+
+def faded_offsets(loop: np.ndarray, offset: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """(K,) offsets (mm) along a closed (K, 3) loop: `offset` where `known` (K,) bool; in a gap, at
+    arc lengths a and b from its two edges, the edges' offsets blended linearly and faded by
+    exp(-a b / ((a + b) FADE_MM)): near an edge exp(-a / FADE_MM), across a short hole nearly a
+    straight ramp, deep in a long gap zero (the template's guess)."""
+    if known.all() or not known.any():
+        return np.where(known, offset, 0.0)
+    step = np.linalg.norm(np.roll(loop, -1, axis=0) - loop, axis=1)
+    s = np.concatenate([[0.0], np.cumsum(step)[:-1]])
+    length = step.sum()
+    at = np.flatnonzero(known)
+    before = at[np.searchsorted(at, np.arange(len(loop)), side="right") - 1]  # index -1 wraps to the last known
+    after = at[np.searchsorted(at, np.arange(len(loop)), side="left") % len(at)]
+    a, b = (s - s[before]) % length, (s[after] - s) % length
+    gap = np.maximum(a + b, 1e-12)
+    out = (b * offset[before] + a * offset[after]) / gap * np.exp(-a * b / (gap * FADE_MM))
+    return np.where(known, offset, out)
 
 
 def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:

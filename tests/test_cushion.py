@@ -193,3 +193,24 @@ def test_seal_points_reach_a_scan_tilted_against_the_template():
     normal = np.array([[np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))]])
     moved, on_scan = onto_scan(np.array([[2.0, 1.0, 0.0]]) + 3.0 * normal, normal, surface)
     assert on_scan.all() and np.allclose(moved, [[2.0, 1.0, 0.0]], atol=1e-4)
+
+
+def test_the_seal_has_no_step_where_the_scan_data_ends():
+    """A seal loop (a circle of radius 40 mm, 128 points) whose scan lies 1.5 mm off it on 3/4 of the
+    loop: in the gap the offset fades from the edges, so the seal is continuous there, and deep in
+    a long gap it is the template's; a short hole is bridged by a ramp between its edges' offsets."""
+    from cpapfit.contact import FADE_MM, faded_offsets
+
+    angle = np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
+    loop = 40.0 * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(128)])
+    step = 2 * np.pi * 40.0 / 128
+    known = angle < 1.5 * np.pi
+    out = faded_offsets(loop, np.where(known, 1.5, np.nan), known)
+    assert np.allclose(out[known], 1.5)
+    jumps = np.abs(np.diff(np.append(out, out[0])))
+    assert jumps.max() <= 1.5 * step / FADE_MM + 0.02  # no step at the edges: at most the fade's slope
+    middle = np.argmin(np.abs(angle - 1.75 * np.pi))  # 31 mm from both edges
+    assert out[middle] <= 1.5 * np.exp(-31.0 / 2 / FADE_MM) + 0.01 and out[middle] < 0.35
+    short = np.where((angle > 1.0) & (angle < 1.2), False, True)  # an 8 mm hole between offsets 1 and 2 mm
+    ramp = faded_offsets(loop, np.where(angle < 1.1, 1.0, 2.0), short)
+    assert np.all(np.diff(ramp[(angle > 0.9) & (angle < 1.3)]) >= 0) and np.abs(np.diff(ramp)).max() < 0.5  # not the 1 mm step

@@ -88,6 +88,26 @@ def test_rim_of_a_flat_ring_on_a_plane():
     assert rim.ds.sum() == pytest.approx(2 * np.pi * RING_MM, rel=0.01)
 
 
+def test_one_stray_triangle_of_a_scan_does_not_lift_the_skin_under_the_rim():
+    """A flat scan on a 0.5 mm grid with one vertex under the rim pulled 3 mm out (a torn edge's
+    spike): the rim's clearance there is still the ring's height (the median under the flange)."""
+    from tests.test_cushion import grid_faces
+
+    n = 161
+    xy = np.stack(np.meshgrid(np.linspace(-40, 40, n), np.linspace(-40, 40, n)), -1).reshape(-1, 2)
+    plane = trimesh.Trimesh(np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n), process=False)
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 10).apply_translation((0, 0, 5 + 3))
+    axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    under = find_rim(ring, plane, plane, axis, up).points[40, :2]  # a rim point, and the scan vertex under it
+    spike = np.argmin(np.linalg.norm(xy - under, axis=1))
+    assert np.linalg.norm(xy[spike] - under) < 0.3
+    height = np.zeros(len(xy))
+    height[spike] = 3.0
+    rim = find_rim(ring, trimesh.Trimesh(np.column_stack([xy, height]), grid_faces(n), process=False), plane, axis, up)
+    assert rim.covered.all()
+    assert rim.clearance == pytest.approx(np.full(256, 3.0), abs=0.01)
+
+
 def test_rim_over_a_sloping_point_cloud_measures_the_same_clearance_as_over_its_mesh():
     """A scan without triangles: the skin under the rim is a plane fitted to the points near the ray."""
     grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.3), np.arange(-60, 61, 1.3)), -1).reshape(-1, 2)

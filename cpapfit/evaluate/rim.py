@@ -24,6 +24,8 @@ CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
 CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
 TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's rim point
 FACE_MM = 4.0  # scanned skin farther than this from the registered face along the ray: a hole in the scan
+PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
+PROBE_RAYS = 6
 
 
 @dataclass(frozen=True)
@@ -102,12 +104,20 @@ def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray):
 
 
 def _skin_below(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray):
-    """(clearance (K,) mm, skin points (K, 3)) below each point along -axis: the first triangle hit,
-    or for a point cloud a plane fitted to the top layer of scan points within CLOUD_RADIUS_MM of the ray."""
-    if isinstance(scan, trimesh.Trimesh):
-        return _look_down(points, scan, axis)[:2]
-    cloud = np.asarray(scan.vertices)
+    """(clearance (K,) mm, skin points (K, 3)) below each point along -axis. A mesh: the median of the
+    first triangle hits under the point and PROBE_RAYS points PROBE_MM around it (the skin under the
+    flange, not one stray triangle at a scan's torn edge; NaN where the centre ray misses). A point
+    cloud: a plane fitted to the top layer of scan points within CLOUD_RADIUS_MM of the ray."""
     across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]  # two directions across the axis
+    if isinstance(scan, trimesh.Trimesh):
+        turn = np.linspace(0.0, 2 * np.pi, PROBE_RAYS, endpoint=False)
+        ring = PROBE_MM * np.column_stack([np.cos(turn), np.sin(turn)]) @ across.T
+        heights = np.stack([_look_down(points + shift, scan, axis)[0] for shift in np.vstack([np.zeros(3), ring])])
+        clearance = np.full(len(points), np.nan)
+        hit = np.isfinite(heights[0])
+        clearance[hit] = np.nanmedian(heights[:, hit], axis=0)
+        return clearance, points - clearance[:, None] * axis
+    cloud = np.asarray(scan.vertices)
     flat, height = cloud @ across, cloud @ axis
     clearance = np.full(len(points), np.nan)
     for i, idx in enumerate(cKDTree(flat).query_ball_point(points @ across, CLOUD_RADIUS_MM)):
