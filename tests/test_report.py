@@ -14,7 +14,7 @@ from cpapfit.io import load_scan
 from cpapfit.io.design import design_files
 from cpapfit.io.report import input_sha256, run_date
 from cpapfit.pipeline import design
-from cpapfit.report.advice import landmark_notices, scan_notices
+from cpapfit.report.advice import Notice, gate_notices, landmark_notices, scan_notices
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files
 from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
 from cpapfit.report.pictures import OPEN_RGB, rim_image
@@ -105,15 +105,27 @@ def test_longest_run_wraps_around_the_loop():
 def test_holes_under_the_seal_and_low_confidence_are_warned(designed1):
     _, d = designed1
     sim, curve = d.alignment.similarity, d.contact.curve
-    assert scan_notices(curve, np.ones(len(curve), dtype=bool), 0.1, sim, "nasal") == []
+    assert scan_notices(curve, np.ones(len(curve), dtype=bool), sim, "nasal") == []
     hole = np.ones(len(curve), dtype=bool)
     hole[:10] = False  # about 12 mm at the start of the loop: the nasal bridge
-    (notice,) = scan_notices(curve, hole, 0.1, sim, "nasal")
-    assert notice.level == "rescan" and "nasal bridge" in notice.text and "Rescan advised" in notice.text
+    (notice,) = scan_notices(curve, hole, sim, "nasal")
+    assert notice.level == "check" and "nasal bridge" in notice.text and "Rescan" not in notice.text
     lm = d.alignment.landmarks
     assert landmark_notices(lm) == []
     doubtful = type(lm)(lm.points, lm.template_index, np.where(np.arange(len(lm.points)) % 3 == 0, 0.1, 1.0), lm.path)
     assert "disagree" in landmark_notices(doubtful)[0].text
+
+
+def test_the_report_advises_a_rescan_exactly_when_fit_json_does(designed1, report):
+    """The report's "Rescan advised" and its reasons are the quality gates' (fit.json), not its own."""
+    scan, d = designed1
+    _, files, fit = report
+    assert fit["rescan_advised"] is False and "Rescan advised" not in files["report.html"].decode()
+    message = "the scan covers 50 % of the nasal mask's seal region; rescan facing the camera (rescan advised below 75 %)"
+    flagged = {**fit, "rescan_advised": True, "warnings": [{"code": "coverage", "message": message}]}
+    page = report_files(d, scan, flagged, PROVENANCE)["report.html"].decode()
+    assert "Rescan advised." in page and "The scan covers 50 % of the nasal mask" in page
+    assert gate_notices(flagged) == [Notice("rescan", message[0].upper() + message[1:] + ".")]
 
 
 def shown_numbers_match(shown: list, fit: dict) -> None:

@@ -14,12 +14,11 @@ LOW_CONFIDENCE = 0.5  # a landmark below this weight disagrees with the others
 LOW_CONFIDENCE_SHARE = 0.2  # warn when more than this share of the landmarks is low
 HOLE_MM = 8.0  # warn when the scan has no data under a longer stretch of the seal
 SEAL_ON_SCAN = 0.9  # warn when less of the seal curve lies on scan data
-RESIDUAL_MM = 0.5  # warn when the registered template lies farther from the scan (median)
 
 
 @dataclass(frozen=True)
 class Notice:
-    """level: "rescan" (the scan is not good enough under the seal) or "check" (look at a picture); text: one sentence."""
+    """level: "rescan" (a quality gate flagged the scan) or "check" (look at a picture); text: one sentence."""
 
     level: str
     text: str
@@ -38,18 +37,21 @@ def landmark_notices(landmarks: Landmarks) -> list[Notice]:
     return out
 
 
-def scan_notices(curve: np.ndarray, on_scan: np.ndarray, residual_median_mm: float, similarity: Similarity, mask: str) -> list[Notice]:
-    """Holes in the scan under the seal curve (K, 3) mm with on_scan (K,) bool, and a loose registration."""
-    out = []
+def gate_notices(fit: dict) -> list[Notice]:
+    """The quality gates' warnings from fit.json (`quality.py`): the one place that decides "rescan advised"."""
+    return [Notice("rescan", w["message"][:1].upper() + w["message"][1:] + ".") for w in fit.get("warnings", [])]
+
+
+def scan_notices(curve: np.ndarray, on_scan: np.ndarray, similarity: Similarity, mask: str) -> list[Notice]:
+    """Where the scan has no data under the seal curve (K, 3) mm with on_scan (K,) bool: a note to look
+    at the contact picture (whether that calls for a rescan is the quality gates' to say)."""
     hole_mm, middle = longest_run_mm(curve, ~on_scan)
-    if hole_mm > HOLE_MM or on_scan.mean() < SEAL_ON_SCAN:
-        where = place_name(around_seal(curve, similarity)[middle], mask) if middle >= 0 else "the seal"
-        out.append(Notice("rescan", f"The scan has no data under {100 * (1 - on_scan.mean()):.0f} % of the seal (longest stretch "
-                                    f"{hole_mm:.0f} mm, near {where}); there the cushion follows the template, not this face. Rescan advised."))
-    if residual_median_mm > RESIDUAL_MM:
-        out.append(Notice("rescan", f"The template lies {residual_median_mm:.2f} mm (median) from the scan, more than {RESIDUAL_MM} mm: "
-                                    "the scan may be noisy or the face may have moved. Rescan advised."))
-    return out
+    if hole_mm <= HOLE_MM and on_scan.mean() >= SEAL_ON_SCAN:
+        return []
+    where = place_name(around_seal(curve, similarity)[middle], mask) if middle >= 0 else "the seal"
+    return [Notice("check", f"The scan has no data under {100 * (1 - on_scan.mean()):.0f} % of the seal (longest stretch "
+                            f"{hole_mm:.0f} mm, near {where}); there the cushion follows the template, not this face: "
+                            "see the contact picture.")]
 
 
 def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, mask: str) -> list[Notice]:

@@ -17,7 +17,7 @@ from ..scan import Scan
 from ..template import load_template
 from ..work import at_once
 from . import pictures as pic
-from .advice import landmark_notices, fit_notices, scan_notices
+from .advice import fit_notices, gate_notices, landmark_notices, scan_notices
 from .figure import ColourScale, zoned_cmap
 from .frame import Face, seal_view, shoot, whole_face_view
 from .page import Page, Picture, lookup, report_html
@@ -145,10 +145,8 @@ def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submi
     centre = np.mean(d.contact.curve, axis=0)
     fig = viewer_figure(viewer_face(face, centre), cushion,
                         {n: (r.points, values[n]) for n, r in rims.items()}, scale, sim, d.cushion.axis)
-    reg = d.registration
-    notices = (landmark_notices(d.alignment.landmarks)
-               + scan_notices(d.contact.curve, d.contact.on_scan, float(np.median(reg.residual[reg.valid])), sim, mask)
-               + fit_notices(rims, window_kpa, sim, mask))
+    notices = (gate_notices(fit) + landmark_notices(d.alignment.landmarks)
+               + scan_notices(d.contact.curve, d.contact.on_scan, sim, mask) + fit_notices(rims, window_kpa, sim, mask))
     trace = (("cpapfit version", __version__), ("date", provenance.date), ("input", provenance.source),
              ("input SHA-256", provenance.sha256), ("scan units", scan.units_note or scan.units),
              ("mask", mask), ("landmarks", f"{len(d.alignment.landmarks.points)} by {d.alignment.landmarks.path}"),
