@@ -5,6 +5,7 @@ import pytest
 import trimesh
 from scipy.spatial import Delaunay
 
+from cpapfit.errors import InputError
 from cpapfit.evaluate.fit import FitParams
 from cpapfit.evaluate.leak import leak_l_min
 from cpapfit.evaluate.mechanics import press
@@ -86,6 +87,15 @@ def test_rim_of_a_flat_ring_on_a_plane():
     assert rim.clearance == pytest.approx(np.full(256, 3.0), abs=1e-6)
     assert rim.sealed_area_mm2 == pytest.approx(np.pi * RING_MM**2, rel=0.01)
     assert rim.ds.sum() == pytest.approx(2 * np.pi * RING_MM, rel=0.01)
+
+
+def test_a_rim_over_no_scanned_skin_is_refused_in_words():
+    """A cushion whose rim lies over none of the scan (placed off the face, or in another frame)."""
+    plane = trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))
+    elsewhere = trimesh.creation.box((10, 10, 2)).apply_translation((150, 150, -1))
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 10).apply_translation((0, 0, 8))
+    with pytest.raises(InputError, match="0 % of the cushion's rim lies over scanned skin"):
+        find_rim(ring, elsewhere, plane, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
 
 
 def test_one_stray_triangle_of_a_scan_does_not_lift_the_skin_under_the_rim():

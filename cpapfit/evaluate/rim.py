@@ -26,6 +26,7 @@ TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's ri
 FACE_MM = 4.0  # scanned skin farther than this from the registered face along the ray: a hole in the scan
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
+MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
 
 
 @dataclass(frozen=True)
@@ -70,8 +71,8 @@ def find_rim(
     """The contact line of a `cushion` mesh over a `scan` surface or point cloud, mm, scan frame. The
     rim is found against `face_mesh` (the registered template: the whole face, no holes), its
     clearance is measured against the scan; where the scan's skin is missing or lies farther than
-    FACE_MM from the face (a ray through a hole), the point is not covered. `axis`: the unit mask
-    axis (out of the face); `up`: the head's up direction."""
+    FACE_MM from the face (a ray through a hole), the point is not covered; InputError if less than
+    MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
     vertices, _ = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM)
     on_face, _, face_cos = _look_down(vertices, face_mesh, axis)
     plane = in_plane(axis, up)
@@ -85,6 +86,9 @@ def find_rim(
     pts = vertices[first]
     clearance, skin = _skin_below(pts, scan, axis)
     clearance[np.abs(clearance - on_face[first]) > FACE_MM] = np.nan
+    if np.isfinite(clearance).mean() < MIN_COVERED:
+        raise InputError(f"only {100 * np.isfinite(clearance).mean():.0f} % of the cushion's rim lies over scanned skin "
+                         f"(at least {100 * MIN_COVERED:.0f} % needed): is the cushion in this scan's frame, in mm?")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
 
