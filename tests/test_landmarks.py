@@ -19,7 +19,7 @@ from cpapfit.landmarks.lift import row_median, row_percentile
 from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.phantom import make_phantom
 from cpapfit.scan import Intrinsics
-from cpapfit.template import load_template
+from cpapfit.template import central_face, load_template
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)
@@ -248,3 +248,20 @@ def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1):
     write_files(tmp_path, capture_files(ph.image, depth, ph.intrinsics, ph.sensor.depth_scale))
     _, _, check = initial_alignment(load_scan(tmp_path), TEMPLATE)
     assert check.is_face and check.below_mm >= 8.0
+
+
+def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
+    """The phantom's alignment passes the face check; the same template shrunk to 0.57 about its
+    nose tip (what MediaPipe on a shaded render once gave) still lies on skin, but not at an adult's size."""
+    from cpapfit.align.check import NOSE_TIP, check_face
+    from cpapfit.align.similarity import Similarity
+
+    ph = phantom1
+    write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    scan = load_scan(tmp_path)
+    _, fit, check = initial_alignment(scan, TEMPLATE)
+    assert check.is_face and 0.8 <= check.scale <= 1.2
+    tip = fit.apply(TEMPLATE.vertices[NOSE_TIP][None])[0]
+    small = Similarity(0.57 * fit.scale, fit.rotation, tip - 0.57 * fit.scale * fit.rotation @ TEMPLATE.vertices[NOSE_TIP])
+    shrunk = check_face(scan, TEMPLATE, small, central_face(TEMPLATE))
+    assert shrunk.coverage >= 0.5 and not shrunk.is_face and "scaled x0.5" in shrunk.describe()

@@ -1,12 +1,15 @@
 """Does an aligned template lie on a face? The guard against confident alignments to non-faces.
 
-Two measures over the template's central face, carried by the similarity onto the scan:
+Measures of the template's central face, carried by the similarity onto the scan:
 - gap: distance from each template point to the scan surface (point-to-plane at the nearest scan
   point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
 - nose: how far the scan rises at the nose tip above the scan 18 mm to either side of it and
   20 mm below it (farther out where a hole leaves no data there), along the face's forward
   direction (a face: 10-25 mm and 12-25 mm; a sphere, a wall: a few mm; the edge of a box: a
-  ridge, but nothing below).
+  ridge, but nothing below);
+- scale: the similarity's, template to scan. Adult faces differ from the template (an average
+  adult's) by ~10 % in size; a face "found" at half or twice its size is another shape mistaken
+  for one (a render's shading, a face seen at the wrong distance), or a scan in other units.
 """
 
 from dataclasses import dataclass
@@ -31,31 +34,35 @@ MIN_COVERAGE = 0.5
 MAX_MEDIAN_GAP_MM = 3.5
 MIN_RIDGE_MM = 6.0
 MIN_BELOW_MM = 8.0
+SCALE_RANGE = (0.7, 1.4)
 
 
 @dataclass(frozen=True)
 class FaceCheck:
     """coverage: fraction of central template points with the scan within 10 mm; median_gap_mm over
     those; ridge_mm, below_mm: how far the scan's nose tip stands out above the scan beside it and
-    below it (a box's edge is a ridge but not a peak)."""
+    below it (a box's edge is a ridge but not a peak); scale: the template's size on the scan."""
 
     coverage: float
     median_gap_mm: float
     ridge_mm: float
     below_mm: float
+    scale: float
 
     @property
     def is_face(self) -> bool:
         return (
             self.coverage >= MIN_COVERAGE and self.median_gap_mm <= MAX_MEDIAN_GAP_MM
             and self.ridge_mm >= MIN_RIDGE_MM and self.below_mm >= MIN_BELOW_MM
+            and SCALE_RANGE[0] <= self.scale <= SCALE_RANGE[1]
         )
 
     def describe(self) -> str:
         return (
             f"{100 * self.coverage:.0f} % of the central face covered (needs {100 * MIN_COVERAGE:.0f} %), median gap "
             f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {self.ridge_mm:.1f} mm above its sides "
-            f"(at least {MIN_RIDGE_MM}) and {self.below_mm:.1f} mm above the lip (at least {MIN_BELOW_MM})"
+            f"(at least {MIN_RIDGE_MM}) and {self.below_mm:.1f} mm above the lip (at least {MIN_BELOW_MM}), "
+            f"template scaled x{self.scale:.2f} (an adult face: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g})"
         )
 
 
@@ -67,7 +74,7 @@ def check_face(scan: Scan, template: Template, similarity: Similarity, central: 
     covered = dist < COVER_MM
     plane = np.abs(np.einsum("ij,ij->i", pts - scan.vertices[idx], scan.normals[idx]))
     gap = float(np.median(plane[covered])) if covered.any() else np.inf
-    return FaceCheck(float(covered.mean()), gap, *_nose(tree, scan, template, similarity))
+    return FaceCheck(float(covered.mean()), gap, *_nose(tree, scan, template, similarity), float(similarity.scale))
 
 
 def _peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> np.ndarray:
