@@ -117,9 +117,10 @@ def design(
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
-    require_quality(assess(scan, al.landmarks, reg, contact))  # or refuse: rescan
     on_stage("cushion")
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
+    rim = rim_gap(neutral.grid(256, 2)[:, 0], scan, face.scan)
+    require_quality(assess(scan, al.landmarks, reg, contact, rim))  # or refuse: rescan
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)
@@ -127,7 +128,7 @@ def design(
     moulding = submit(checked_mould, cushion, solid)
     fits = evaluate(face, al, solid, mask, params, fit_params)
     moulded = moulding.result()
-    return Design(al, reg, contact, cushion, solid, checks, rim_gap(neutral.grid(256, 2)[:, 0], scan, face.scan), preload,
+    return Design(al, reg, contact, cushion, solid, checks, rim, preload,
                   moulded.parts, moulded.draft, fits, fit_params)
 
 

@@ -24,6 +24,7 @@ from scipy.spatial import cKDTree
 from .align.nonrigid import Registration
 from .contact import Contact
 from .errors import QualityError
+from .evaluate.gap import RimGap
 from .landmarks.types import Landmarks
 from .scan import Scan
 from .template import load_template
@@ -41,6 +42,9 @@ class QualityParams:
     hole_*_mm: longest stretch of the seal over a hole, mm along the seal (bad above).
     residual_*_mm: median registration residual over the seal band, mm (bad above).
     landmarks_*_mm: median distance of the landmarks from the scanned skin, mm (bad above).
+    rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
+        median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
+        it by construction (<= 0.6 mm), unless the template missed the face there.
     Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
     flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin.
     """
@@ -54,6 +58,8 @@ class QualityParams:
     residual_refuse_mm: float = 1.5
     landmarks_flag_mm: float = 1.0
     landmarks_refuse_mm: float = 5.0
+    rim_gap_flag_mm: float = 1.0
+    rim_gap_refuse_mm: float = 3.0
 
 
 @dataclass(frozen=True)
@@ -127,9 +133,10 @@ def longest_run(bad: np.ndarray) -> int:
     return int(runs.max())
 
 
-def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact: Contact,
+def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact: Contact, rim: RimGap,
            params: QualityParams = QualityParams()) -> Quality:
-    """The gates for the landmarks, the registration and the seal it carried onto `scan`."""
+    """The gates for the landmarks, the registration, the seal it carried onto `scan` and the rim of
+    the cushion designed on it."""
     p, mask = params, contact.mask
     tree = cKDTree(scan.vertices)
     reach = max(p.near_mm, SPACINGS * spacing(tree))
@@ -148,6 +155,9 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         _gate("residual_mm", residual, (p.residual_flag_mm, p.residual_refuse_mm),
               f"the registered face lies a median {residual:.2f} mm from the scan over the seal",
               "a noisy scan, or one that moved: rescan holding still"),
+        _gate("rim_gap_mm", rim.worst_stretch_mm(), (p.rim_gap_flag_mm, p.rim_gap_refuse_mm),
+              f"the cushion's rim stands up to {rim.worst_stretch_mm():.1f} mm off the scanned skin over several mm of rim",
+              "the template missed the face there: give landmarks with --landmarks, or rescan facing the camera"),
     ]
     if landmarks.path != "fallback":
         off = float(np.median(off_skin(scan, tree, landmarks.points, reach)))
@@ -159,7 +169,7 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
 
 def assess_design(design, scan: Scan, params: QualityParams = QualityParams()) -> Quality:
     """The gates of a pipeline `Design` made from `scan`."""
-    return assess(scan, design.alignment.landmarks, design.registration, design.contact, params)
+    return assess(scan, design.alignment.landmarks, design.registration, design.contact, design.rim, params)
 
 
 def require_quality(quality: Quality) -> Quality:

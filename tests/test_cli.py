@@ -10,6 +10,8 @@ import pytest
 import trimesh
 from PIL import Image
 
+from cpapfit.export import SolidError
+
 
 def assert_one_line_error(code, out, err, *words):
     assert code == 2
@@ -168,7 +170,8 @@ def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
 
 def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, monkeypatch):
     """A seal curve that crosses itself (two opposite stretches swapped, as a misplaced template
-    can carry) makes a cushion crossing itself: refused, saying so and what to do, nothing written."""
+    can carry) puts the cushion's rim off the skin: refused by the rim gate before any solid is
+    built, saying what to do, nothing written. A cushion that still crosses itself is refused too."""
     import dataclasses
 
     import cpapfit.pipeline as pipeline
@@ -183,5 +186,9 @@ def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, 
 
     monkeypatch.setattr(pipeline, "transfer_contact", twisted)
     out = tmp_path / "out"
-    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "cross itself", "--landmarks")
+    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "rim_gap_mm", "off the scanned skin", "--landmarks")
     assert not out.exists() or not any(out.iterdir())
+    a = trimesh.creation.box((10, 10, 10))
+    crossing = trimesh.util.concatenate([a, a.copy().apply_translation((3, 4, 2.5))])  # two boxes through each other
+    with pytest.raises(SolidError, match="would cross itself .* give landmarks with --landmarks"):
+        pipeline._checked(crossing, 5.0, 2.0, "the nasal cushion", "render")

@@ -25,7 +25,9 @@ from cpapfit.work import at_once
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.phantom import SensorModel, make_phantom, with_holes
-from cpapfit.quality import QualityParams, longest_run
+from cpapfit.evaluate.gap import RimGap
+from cpapfit.errors import QualityError
+from cpapfit.quality import QualityParams, assess, assess_design, longest_run, require_quality
 from cpapfit.template import load_template
 
 GATES = QualityParams()
@@ -89,6 +91,7 @@ def test_a_clean_subject_trips_no_gate(twice):
     q = fit["quality"]
     assert q["coverage"] > GATES.coverage_flag and q["hole_mm"] < GATES.hole_flag_mm
     assert q["residual_mm"] < GATES.residual_flag_mm and q["landmarks_mm"] < GATES.landmarks_flag_mm
+    assert q["rim_gap_mm"] < GATES.rim_gap_flag_mm
     assert "rescan advised" not in err
 
 
@@ -121,6 +124,24 @@ def test_landmarks_off_the_skin_are_flagged(tmp_path, phantom1):
     (tmp_path / "lm.json").write_text(json.dumps({"points": off.tolist(), "template_index": idx.tolist()}))
     codes, err = design_flags(tmp_path, phantom1, "--landmarks", tmp_path / "lm.json")
     assert codes == ["landmarks_mm"], err
+
+
+def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):
+    """Where the template missed the face the cushion's rim stands off the scanned skin (a mesh once
+    gave 9 mm over 60 mm of rim): refused. One noisy sample 3 mm off is not a stretch of rim."""
+    ph, d = designed
+    write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    scan = load_scan(tmp_path)
+    assert assess_design(d, scan).record()["quality"]["rim_gap_mm"] < GATES.rim_gap_flag_mm
+    off_skin = RimGap(np.where(np.arange(256) < 60, 9.0, d.rim.gap), d.rim.covered | (np.arange(256) < 60))
+    with pytest.raises(QualityError, match="rim stands up to 9.0 mm off the scanned skin"):
+        require_quality(assess(scan, d.alignment.landmarks, d.registration, d.contact, off_skin))
+    spike = np.zeros(256)
+    spike[100] = 3.0
+    assert RimGap(spike, np.ones(256, dtype=bool)).worst_stretch_mm() == 0.0
+    off = np.where((np.arange(256) >= 40) & (np.arange(256) < 100), 9.0, 0.2)
+    assert RimGap(off, np.ones(256, dtype=bool)).worst_stretch_mm() == pytest.approx(9.0)
+    assert RimGap(off, np.arange(256) < 40).worst_stretch_mm() == pytest.approx(0.2)  # over no scan data: not measured
 
 
 def test_longest_hole_wraps_around_the_seal():

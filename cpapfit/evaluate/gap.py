@@ -4,6 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.ndimage import median_filter
 from scipy.spatial import cKDTree
 
 from ..align.correspondences import boundary_vertices, grid_boundary
@@ -21,6 +22,12 @@ class RimGap:
 
     def __post_init__(self):
         freeze_arrays(self)
+
+    def worst_stretch_mm(self, samples: int = 9) -> float:
+        """The largest running median of the gap over `samples` consecutive covered rim points (mm;
+        0 if none is covered): a stretch of rim off the skin, not one noisy sample of the scan."""
+        g = self.gap[self.covered]
+        return float(median_filter(g, size=min(samples, len(g)), mode="wrap").max()) if len(g) else 0.0
 
     def summary(self) -> dict:
         g = self.gap[self.covered]
