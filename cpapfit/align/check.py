@@ -6,8 +6,10 @@ Measures of the template's central face, carried by the similarity onto the scan
 - nose: how far the scan rises at the nose tip above the scan 18 mm to either side of it and
   20 mm below it (farther out where a hole leaves no data there), along the face's forward
   direction (a face: 10-30 mm and 10-25 mm; a sphere, a wall: a few mm; the edge of a box: a
-  ridge, but nothing below); each height is the median of the scan points within PROBE_MM
-  across (their highest rose with the depth noise: 1.4 mm of it took 5 mm off a face's nose);
+  ridge, but nothing below); each height is the upper quartile of the scan points within
+  PROBE_MM across: the skin's top layer, not the noise's highest point (1.4 mm of depth noise
+  took 5 mm off a face's nose) nor the middle of a slope (the median let a template misplaced on
+  a shaded render pass);
 - scale: the similarity's, template to scan. Adult faces differ from the template (an average
   adult's) by ~10 % in size; a face "found" at half or twice its size is another shape mistaken
   for one (a render's shading, a face seen at the wrong distance), or a scan in other units.
@@ -29,6 +31,7 @@ RIDGE_OFFSETS_MM = (18.0, 22.0, 26.0)  # probed in turn on each side: the first 
 BELOW_OFFSETS_MM = (20.0, 25.0, 30.0)  # probed in turn: the first with scan data counts
 PEAK_SEARCH_MM = 15.0
 PROBE_MM = 4.0
+TOP_LAYER_PERCENTILE = 75.0
 
 # Thresholds: a face passes all three.
 MIN_COVERAGE = 0.5
@@ -106,7 +109,7 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
         lateral = scan.vertices[near] - at
         lateral -= np.outer(lateral @ forward, forward)
         pts = scan.vertices[near][np.linalg.norm(lateral, axis=1) < PROBE_MM]
-        return float(np.median(pts @ forward)) if len(pts) else np.nan
+        return float(np.percentile(pts @ forward, TOP_LAYER_PERCENTILE)) if len(pts) else np.nan
 
     tip = _peak(tree, scan, tip, forward)
     top = height(tip)
