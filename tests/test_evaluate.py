@@ -89,6 +89,28 @@ def test_rim_of_a_flat_ring_on_a_plane():
     assert rim.ds.sum() == pytest.approx(2 * np.pi * RING_MM, rel=0.01)
 
 
+def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():
+    """The registered face a plane at z = 0; the scan the same plane except a patch under the rim
+    6 mm behind it (a ray through a hole meets what lies behind) and one 6 mm in front of it (a
+    template sunk into the face, or something on it): the first is not covered, the second is,
+    with the rim 3 mm inside it."""
+    from tests.test_cushion import grid_faces
+
+    n = 161
+    xy = np.stack(np.meshgrid(np.linspace(-40, 40, n), np.linspace(-40, 40, n)), -1).reshape(-1, 2)
+    face = trimesh.Trimesh(np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n), process=False)
+    height = np.where(np.linalg.norm(xy - [RING_MM, 0.0], axis=1) < 5.0, -6.0, 0.0)
+    height = np.where(np.linalg.norm(xy - [-RING_MM, 0.0], axis=1) < 5.0, 6.0, height)
+    scan = trimesh.Trimesh(np.column_stack([xy, height]), grid_faces(n), process=False)
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 10).apply_translation((0, 0, 5 + 3))
+    rim = find_rim(ring, scan, face, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    behind = np.linalg.norm(rim.points[:, :2] - [RING_MM, 0.0], axis=1) < 3.0
+    front = np.linalg.norm(rim.points[:, :2] - [-RING_MM, 0.0], axis=1) < 3.0
+    assert behind.any() and front.any()
+    assert not rim.covered[behind].any()
+    assert rim.covered[front].all() and rim.clearance[front] == pytest.approx(-3.0, abs=0.01)
+
+
 def test_a_rim_over_no_scanned_skin_is_refused_in_words():
     """A cushion whose rim lies over none of the scan (placed off the face, or in another frame)."""
     plane = trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))

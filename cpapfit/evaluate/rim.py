@@ -23,7 +23,7 @@ REACH_MM = 60.0  # rays start this far above each vertex, so rims pressed into t
 CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
 CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
 TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's rim point
-FACE_MM = 4.0  # scanned skin farther than this from the registered face along the ray: a hole in the scan
+FACE_MM = 4.0  # scanned skin farther than this behind the registered face along the ray: a hole in the scan
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
 MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
@@ -70,8 +70,9 @@ def find_rim(
 ) -> RimContact:
     """The contact line of a `cushion` mesh over a `scan` surface or point cloud, mm, scan frame. The
     rim is found against `face_mesh` (the registered template: the whole face, no holes), its
-    clearance is measured against the scan; where the scan's skin is missing or lies farther than
-    FACE_MM from the face (a ray through a hole), the point is not covered; InputError if less than
+    clearance is measured against the scan; where the scan's skin is missing or lies more than
+    FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
+    of the face counts: the cushion would press on it); InputError if less than
     MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
     vertices, _ = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM)
     on_face, _, face_cos = _look_down(vertices, face_mesh, axis)
@@ -85,7 +86,7 @@ def find_rim(
         raise InputError("the cushion does not run all the way round the mask axis over the face")
     pts = vertices[first]
     clearance, skin = _skin_below(pts, scan, axis)
-    clearance[np.abs(clearance - on_face[first]) > FACE_MM] = np.nan
+    clearance[clearance - on_face[first] > FACE_MM] = np.nan
     if np.isfinite(clearance).mean() < MIN_COVERED:
         raise InputError(f"only {100 * np.isfinite(clearance).mean():.0f} % of the cushion's rim lies over scanned skin "
                          f"(at least {100 * MIN_COVERED:.0f} % needed): is the cushion in this scan's frame, in mm?")
