@@ -24,12 +24,11 @@ from scipy.spatial import cKDTree
 from .align.nonrigid import Registration
 from .contact import Contact
 from .errors import QualityError
-from .evaluate.gap import RimGap
+from .evaluate.gap import SPACINGS, RimGap, off_skin, spacing
 from .landmarks.types import Landmarks
 from .scan import Scan
 from .template import load_template
 
-SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
 
 
 @dataclass(frozen=True)
@@ -108,20 +107,6 @@ def _gate(code: str, value: float, limits: tuple[float, float], what: str, advic
         code, float(value), worse(value, flag_at), worse(value, refuse_at),
         f"{what}; {advice} (rescan advised {side} {scale * flag_at:g}{unit}, refused {side} {scale * refuse_at:g}{unit})",
     )
-
-
-def spacing(tree: cKDTree, sample: int = 2000) -> float:
-    """Median distance (mm) from a scan point to its nearest neighbour (a deterministic sample)."""
-    points = tree.data[:: max(1, len(tree.data) // sample)]
-    return float(np.median(tree.query(points, k=2)[0][:, 1]))
-
-
-def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:
-    """(K,) distance (mm) of points from the scan: to the tangent plane at the nearest scan point
-    when that is within `reach` (a coarse mesh's vertices are far apart), else to the point."""
-    dist, idx = tree.query(points)
-    plane = np.abs(np.einsum("ij,ij->i", points - scan.vertices[idx], scan.normals[idx]))
-    return np.where(dist <= reach, plane, dist)
 
 
 def longest_run(bad: np.ndarray) -> int:

@@ -111,6 +111,19 @@ def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():
     assert rim.covered[front].all() and rim.clearance[front] == pytest.approx(-3.0, abs=0.01)
 
 
+def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points():
+    """A cloud of points 4 mm apart on the plane z = 0 (with its normals): rim points 0.2 mm above it,
+    midway between points (2.8 mm from the nearest), are 0.2 mm off the skin; 9 mm above, 9 mm."""
+    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.scan import Scan
+
+    grid = np.stack(np.meshgrid(np.arange(-40, 41, 4.0), np.arange(-40, 41, 4.0)), -1).reshape(-1, 2)
+    cloud = Scan(np.column_stack([grid, np.zeros(len(grid))]), np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1)))
+    midway = np.column_stack([grid[:40] + 2.0, np.full(40, 0.2)])
+    assert rim_gap(midway, cloud, None).gap == pytest.approx(np.full(40, 0.2), abs=1e-9)
+    assert rim_gap(midway + [0, 0, 8.8], cloud, None).gap.min() >= 9.0
+
+
 def test_a_rim_over_no_scanned_skin_is_refused_in_words():
     """A cushion whose rim lies over none of the scan (placed off the face, or in another frame)."""
     plane = trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))

@@ -11,6 +11,9 @@ from ..align.correspondences import boundary_vertices, grid_boundary
 from ..frozen import freeze_arrays
 from ..scan import Scan
 
+SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
+CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point is measured to its tangent plane
+
 
 @dataclass(frozen=True)
 class RimGap:
@@ -39,10 +42,25 @@ class RimGap:
 
 
 def rim_gap(rim: np.ndarray, scan: Scan, surface: trimesh.Trimesh | trimesh.PointCloud) -> RimGap:
-    """Distances from (K, 3) rim points to the scan (mm; its surface: `scan_surface`), and where the scan covers them."""
-    if scan.is_point_cloud:
-        dist, _ = cKDTree(scan.vertices).query(rim)
-        return RimGap(dist, np.ones(len(rim), dtype=bool))
+    """Distances from (K, 3) rim points to the scan (mm; its surface: `scan_surface`; for a point cloud
+    the tangent plane at the nearest point, if within CLOUD_REACH_MM), and where the scan covers them."""
+    if scan.is_point_cloud:  # to the tangent plane at the nearest point: not the gaps between the points
+        tree = cKDTree(scan.vertices)
+        return RimGap(off_skin(scan, tree, rim, max(CLOUD_REACH_MM, SPACINGS * spacing(tree))), np.ones(len(rim), dtype=bool))
     _, dist, tri = trimesh.proximity.closest_point(surface, rim)
     rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
     return RimGap(dist, ~rims[scan.faces[tri]].any(axis=1))
+
+
+def spacing(tree: cKDTree, sample: int = 2000) -> float:
+    """Median distance (mm) from a scan point to its nearest neighbour (a deterministic sample)."""
+    points = tree.data[:: max(1, len(tree.data) // sample)]
+    return float(np.median(tree.query(points, k=2)[0][:, 1]))
+
+
+def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:
+    """(K,) distance (mm) of points from the scan: to the tangent plane at the nearest scan point
+    when that is within `reach` (a coarse mesh's vertices are far apart), else to the point."""
+    dist, idx = tree.query(points)
+    plane = np.abs(np.einsum("ij,ij->i", points - scan.vertices[idx], scan.normals[idx]))
+    return np.where(dist <= reach, plane, dist)
