@@ -30,7 +30,6 @@ from .scan import Scan
 from .template import load_template
 
 
-
 @dataclass(frozen=True)
 class QualityParams:
     """Thresholds of the gates. Past *_flag: "rescan advised" (fit.json, report); past *_refuse: no design.
@@ -132,6 +131,7 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
     hole = longest_run(seal_gap) * seal_mm / len(seal_gap)
     matched = registration.residual[band][registration.valid[band]]
     residual = float(np.median(matched)) if len(matched) else np.inf
+    off_rim = rim.worst_stretch_mm()
     gates = [
         _gate("coverage", near, (p.coverage_flag, p.coverage_refuse), f"the scan covers {100 * near:.0f} % of the {mask} mask's seal region",
               "rescan with the whole mask region (nose, cheeks, lips) in view, facing the camera", " %"),
@@ -140,8 +140,8 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         _gate("residual_mm", residual, (p.residual_flag_mm, p.residual_refuse_mm),
               f"the registered face lies a median {residual:.2f} mm from the scan over the seal",
               "a noisy scan, or one that moved: rescan holding still"),
-        _gate("rim_gap_mm", rim.worst_stretch_mm(), (p.rim_gap_flag_mm, p.rim_gap_refuse_mm),
-              f"the cushion's rim stands up to {rim.worst_stretch_mm():.1f} mm off the scanned skin over several mm of rim",
+        _gate("rim_gap_mm", off_rim, (p.rim_gap_flag_mm, p.rim_gap_refuse_mm),
+              f"the cushion's rim stands up to {off_rim:.1f} mm off the scanned skin over several mm of rim",
               "the template missed the face there: give landmarks with --landmarks, or rescan facing the camera"),
     ]
     if landmarks.path != "fallback":

@@ -87,8 +87,9 @@ def find_rim(
     pts = vertices[first]
     clearance, skin = _skin_below(pts, scan, axis)
     clearance[clearance - on_face[first] > FACE_MM] = np.nan
-    if np.isfinite(clearance).mean() < MIN_COVERED:
-        raise InputError(f"only {100 * np.isfinite(clearance).mean():.0f} % of the cushion's rim lies over scanned skin "
+    covered = np.isfinite(clearance).mean()
+    if covered < MIN_COVERED:
+        raise InputError(f"only {100 * covered:.0f} % of the cushion's rim lies over scanned skin "
                          f"(at least {100 * MIN_COVERED:.0f} % needed): is the cushion in this scan's frame, in mm?")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
@@ -117,7 +118,8 @@ def _skin_below(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, 
     if isinstance(scan, trimesh.Trimesh):
         turn = np.linspace(0.0, 2 * np.pi, PROBE_RAYS, endpoint=False)
         ring = PROBE_MM * np.column_stack([np.cos(turn), np.sin(turn)]) @ across.T
-        heights = np.stack([_look_down(points + shift, scan, axis)[0] for shift in np.vstack([np.zeros(3), ring])])
+        shifts = np.vstack([np.zeros(3), ring])
+        heights = _look_down((points[None] + shifts[:, None]).reshape(-1, 3), scan, axis)[0].reshape(len(shifts), len(points))
         clearance = np.full(len(points), np.nan)
         hit = np.isfinite(heights[0])
         clearance[hit] = np.nanmedian(heights[:, hit], axis=0)
