@@ -124,6 +124,27 @@ def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points(
     assert rim_gap(midway + [0, 0, 8.8], cloud, None).gap.min() >= 9.0
 
 
+def test_a_rim_over_a_mesh_is_measured_to_the_skin_under_its_flange_not_one_stray_sample():
+    """The plane z = 0 sampled every 0.5 mm, every 8th sample along each row standing 0.8 mm up (stray
+    samples): rim points on the plane right above those samples, 0.3 mm from the closest scan
+    surface, lie within 0.01 mm of the skin under the flange; 2 mm above the plane, 2 mm."""
+    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.scan import Scan
+
+    n = 41
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    stray = (i % 8 == 4) & (j % 8 == 4)
+    vertices = np.column_stack([0.5 * (i.ravel() - 20.0), 0.5 * (j.ravel() - 20.0), 0.8 * stray.ravel()])
+    corner = (i[:-1, :-1] * n + j[:-1, :-1]).ravel()
+    faces = np.vstack([np.column_stack([corner, corner + n, corner + 1]), np.column_stack([corner + 1, corner + n, corner + n + 1])])
+    scan = Scan(vertices, faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
+    surface = trimesh.Trimesh(vertices, faces, process=False)
+    rim = vertices[stray.ravel()] * [1, 1, 0]
+    assert trimesh.proximity.closest_point(surface, rim)[1].min() >= 0.3
+    assert rim_gap(rim, scan, surface).gap.max() <= 0.01
+    assert rim_gap(rim + [0, 0, 2], scan, surface).gap == pytest.approx(np.full(len(rim), 2.0), abs=0.01)
+
+
 def test_a_rim_over_no_scanned_skin_is_refused_in_words():
     """A cushion whose rim lies over none of the scan (placed off the face, or in another frame)."""
     plane = trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))

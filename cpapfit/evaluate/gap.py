@@ -10,9 +10,11 @@ from scipy.spatial import cKDTree
 from ..align.correspondences import boundary_vertices, grid_boundary
 from ..frozen import freeze_arrays
 from ..scan import Scan
+from .rim import skin_under
 
 SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
 CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point is measured to its tangent plane
+NORMAL_REACH_MM = 10.0  # a mesh's skin under a rim point is looked for along the normal from this far out
 
 
 @dataclass(frozen=True)
@@ -42,14 +44,22 @@ class RimGap:
 
 
 def rim_gap(rim: np.ndarray, scan: Scan, surface: trimesh.Trimesh | trimesh.PointCloud) -> RimGap:
-    """Distances from (K, 3) rim points to the scan (mm; its surface: `scan_surface`; for a point cloud
-    the tangent plane at the nearest point, if within CLOUD_REACH_MM), and where the scan covers them."""
-    if scan.is_point_cloud:  # to the tangent plane at the nearest point: not the gaps between the points
+    """Distances from (K, 3) rim points to the scan (mm), and where the scan covers them. A mesh
+    (`surface`: `scan_surface`): to the skin under the flange along the scan's normal, as
+    `evaluate.rim` measures it (`skin_under`; the closest point where that finds none); a point
+    cloud: to the tangent plane at the nearest point, if within CLOUD_REACH_MM (not the gaps
+    between the points)."""
+    if scan.is_point_cloud:
         tree = cKDTree(scan.vertices)
         return RimGap(off_skin(scan, tree, rim, max(CLOUD_REACH_MM, SPACINGS * spacing(tree))), np.ones(len(rim), dtype=bool))
-    _, dist, tri = trimesh.proximity.closest_point(surface, rim)
+    on, dist, tri = trimesh.proximity.closest_point(surface, rim)
+    corners = scan.faces[tri]
+    weights = trimesh.triangles.points_to_barycentric(surface.triangles[tri], on)
+    normals = np.einsum("ij,ijk->ik", weights, scan.normals[corners])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    gap = np.abs(skin_under(rim, surface, normals, NORMAL_REACH_MM))
     rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
-    return RimGap(dist, ~rims[scan.faces[tri]].any(axis=1))
+    return RimGap(np.where(np.isfinite(gap), gap, dist), ~rims[corners].any(axis=1))
 
 
 def spacing(tree: cKDTree, sample: int = 2000) -> float:

@@ -95,35 +95,47 @@ def find_rim(
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
 
 
-def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray):
+def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray, reach: float = REACH_MM):
     """(clearance (V,) mm along the axis to the mesh, NaN where none; hit points (V, 3); |cos| of
-    the mesh normal to the axis (V,))."""
-    origins = vertices + REACH_MM * axis
-    loc, ray, tri = mesh.ray.intersects_location(origins, np.tile(-axis, (len(vertices), 1)), multiple_hits=False)
+    the mesh normal to the axis (V,)). axis: one unit (3,) direction, or (V, 3), one per vertex; rays
+    start `reach` mm above the vertices."""
+    axes = np.broadcast_to(axis, vertices.shape)
+    origins = vertices + reach * axes
+    loc, ray, tri = mesh.ray.intersects_location(origins, -axes, multiple_hits=False)
     clearance = np.full(len(vertices), np.nan)
-    clearance[ray] = np.linalg.norm(loc - origins[ray], axis=1) - REACH_MM
+    clearance[ray] = np.linalg.norm(loc - origins[ray], axis=1) - reach
     hits = np.full((len(vertices), 3), np.nan)
     hits[ray] = loc
     cos = np.ones(len(vertices))
-    cos[ray] = np.abs(mesh.face_normals[tri] @ axis)
+    cos[ray] = np.abs(np.einsum("ij,ij->i", mesh.face_normals[tri], axes[ray]))
     return clearance, hits, cos
 
 
+def skin_under(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float = REACH_MM) -> np.ndarray:
+    """(K,) clearance (mm) of (K, 3) points over the skin under a flange resting there: the median of
+    the first hits of rays down the unit axes ((3,), or (K, 3) one per point) from the point and
+    PROBE_RAYS points PROBE_MM around it (not one stray triangle at a scan's torn edge, nor one
+    noisy sample); NaN where the centre ray misses."""
+    axes = np.broadcast_to(axes, points.shape)
+    side = np.cross(axes, np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    turn = np.linspace(0.0, 2 * np.pi, PROBE_RAYS, endpoint=False)[:, None, None]
+    ring = PROBE_MM * (np.cos(turn) * side + np.sin(turn) * np.cross(axes, side))
+    probes = points[None] + np.vstack([np.zeros((1,) + points.shape), ring])
+    heights = _look_down(probes.reshape(-1, 3), mesh, np.tile(axes, (len(probes), 1)), reach)[0].reshape(len(probes), -1)
+    clearance = np.full(len(points), np.nan)
+    hit = np.isfinite(heights[0])
+    clearance[hit] = np.nanmedian(heights[:, hit], axis=0)
+    return clearance
+
+
 def _skin_below(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray):
-    """(clearance (K,) mm, skin points (K, 3)) below each point along -axis. A mesh: the median of the
-    first triangle hits under the point and PROBE_RAYS points PROBE_MM around it (the skin under the
-    flange, not one stray triangle at a scan's torn edge; NaN where the centre ray misses). A point
-    cloud: a plane fitted to the top layer of scan points within CLOUD_RADIUS_MM of the ray."""
-    across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]  # two directions across the axis
+    """(clearance (K,) mm, skin points (K, 3)) below each point along -axis. A mesh: `skin_under`.
+    A point cloud: a plane fitted to the top layer of scan points within CLOUD_RADIUS_MM of the ray."""
     if isinstance(scan, trimesh.Trimesh):
-        turn = np.linspace(0.0, 2 * np.pi, PROBE_RAYS, endpoint=False)
-        ring = PROBE_MM * np.column_stack([np.cos(turn), np.sin(turn)]) @ across.T
-        shifts = np.vstack([np.zeros(3), ring])
-        heights = _look_down((points[None] + shifts[:, None]).reshape(-1, 3), scan, axis)[0].reshape(len(shifts), len(points))
-        clearance = np.full(len(points), np.nan)
-        hit = np.isfinite(heights[0])
-        clearance[hit] = np.nanmedian(heights[:, hit], axis=0)
+        clearance = skin_under(points, scan, axis)
         return clearance, points - clearance[:, None] * axis
+    across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]  # two directions across the axis
     cloud = np.asarray(scan.vertices)
     flat, height = cloud @ across, cloud @ axis
     clearance = np.full(len(points), np.nan)
