@@ -11,6 +11,9 @@ Measured once the template is registered and the seal carried over (all mm):
   lifted from the depth, so they lie on it; landmarks off it (another session's coordinates, a
   wrong frame, a careless file) drag the registration, and the mask, along the skin where
   nothing in the geometry can pull it back. Landmark-free alignments (fallback) are not judged.
+- landmark spread (a user's landmarks): their median distance to their places on the face
+  registered at the detected landmarks' weight (`Registration.landmark_spread_mm`): past the
+  registration's trust they were not given the paper's weight, and the file deserves a look.
 
 Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
 threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
@@ -21,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .align.nonrigid import Registration
+from .align.nonrigid import NonrigidParams, Registration
 from .contact import Contact
 from .errors import QualityError
 from .evaluate.gap import SPACINGS, RimGap, off_skin, spacing
@@ -40,6 +43,8 @@ class QualityParams:
     hole_*_mm: longest stretch of the seal over a hole, mm along the seal (bad above).
     residual_*_mm: median registration residual over the seal band, mm (bad above).
     landmarks_*_mm: median distance of the landmarks from the scanned skin, mm (bad above).
+    landmark_spread_*_mm: a user's landmarks' median distance along the face from their places on
+        it, mm (bad above); flagged where the registration stops trusting them.
     rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
         median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
         it by construction (<= 0.6 mm), unless the template missed the face there.
@@ -56,6 +61,8 @@ class QualityParams:
     residual_refuse_mm: float = 1.5
     landmarks_flag_mm: float = 1.0
     landmarks_refuse_mm: float = 5.0
+    landmark_spread_flag_mm: float = NonrigidParams().user_trust_mm
+    landmark_spread_refuse_mm: float = 10.0
     rim_gap_flag_mm: float = 1.0
     rim_gap_refuse_mm: float = 3.0
 
@@ -149,6 +156,11 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         gates.append(_gate("landmarks_mm", off, (p.landmarks_flag_mm, p.landmarks_refuse_mm),
                            f"the {landmarks.path} landmarks lie a median {off:.1f} mm off the scanned skin",
                            "they disagree with the geometry: check the landmarks file, or rescan"))
+    if landmarks.path == "user":
+        spread = registration.landmark_spread_mm
+        gates.append(_gate("landmark_spread_mm", spread, (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm),
+                           f"the landmarks file's points lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
+                           "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out"))
     return Quality(tuple(gates))
 
 

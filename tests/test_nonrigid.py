@@ -3,12 +3,14 @@
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
 
 from cpapfit.align.laplacian import laplacian
 from cpapfit.align.nonrigid import NonrigidParams, register, vertex_normals
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
+from cpapfit.landmarks.types import Landmarks
 from cpapfit.metrics import flipped_triangles, mask_region, scan_to_template
 from cpapfit.phantom import make_phantom
 from cpapfit.pipeline import align
@@ -78,6 +80,31 @@ def test_paper_mode_follows_the_paper_schedule(case):
     halved = [b for a, b in zip(log, log[1:]) if b.membrane < a.membrane]
     assert all(b.membrane == pytest.approx(a.membrane / 2) for a, b in zip(log, log[1:]) if b.membrane < a.membrane)
     assert len(halved) >= 3 and log[-1].mean_residual_mm < log[0].mean_residual_mm
+
+
+def user_landmarks(scan, points, index, sigma):
+    """A user's landmarks file: `points` moved sigma mm (per axis, seed 0) and put back on the skin."""
+    moved = points + np.random.default_rng(0).normal(0.0, sigma, points.shape)
+    return Landmarks(scan.vertices[cKDTree(scan.vertices).query(moved)[1]], index, np.ones(len(index)), "user")
+
+
+def test_a_users_landmarks_earn_the_paper_weight_only_if_they_agree_with_the_face(case):
+    """Placed to ~1 mm (the truth moved 1 mm): the paper's weight, and the mask region at least as
+    near its true place as with detected landmarks; 4 mm off along the skin: a tenth of it, and the
+    mask region within 0.2 mm of where detected landmarks put it (at the paper's weight those
+    landmarks drag it 0.1 mm or more further off)."""
+    ph, scan, aligned, regs = case
+    index = align(scan).landmarks.template_index
+    error = lambda reg: np.linalg.norm(reg.vertices[REGION] - ph.surface[REGION], axis=1).mean()  # noqa: E731
+    good = register(aligned, TEMPLATE.faces, scan, user_landmarks(scan, ph.surface[index], index, 1.0))
+    assert good.landmark_factor == 1.0 and good.landmark_spread_mm <= 2.0
+    assert error(good) <= error(regs["grid"]) + 0.05
+    careless = user_landmarks(scan, ph.surface[index], index, 4.0)
+    bad = register(aligned, TEMPLATE.faces, scan, careless)
+    assert bad.landmark_factor == pytest.approx(0.1) and bad.landmark_spread_mm >= 3.0
+    assert error(bad) <= error(regs["grid"]) + 0.2
+    trusted = register(aligned, TEMPLATE.faces, scan, careless, NonrigidParams(user_trust_mm=np.inf))
+    assert error(trusted) >= error(bad) + 0.1
 
 
 def test_holes_are_bridged(tmp_path):

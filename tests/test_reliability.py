@@ -14,6 +14,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 import pytest
+import trimesh
 
 from cpapfit.cli import main
 from cpapfit.io import load_scan
@@ -124,6 +125,21 @@ def test_landmarks_off_the_skin_are_flagged(tmp_path, phantom1):
     (tmp_path / "lm.json").write_text(json.dumps({"points": off.tolist(), "template_index": idx.tolist()}))
     codes, err = design_flags(tmp_path, phantom1, "--landmarks", tmp_path / "lm.json")
     assert codes == ["landmarks_mm"], err
+
+
+def test_landmarks_off_along_the_skin_are_flagged_and_not_trusted(tmp_path, phantom1):
+    """The true landmarks moved 4 mm (per axis) and put back on the skin (a careless file): on the
+    skin, so the landmarks_mm gate passes them; far from their places on the face, so they are used
+    at the detected landmarks' weight and the design is flagged."""
+    idx = np.arange(0, 468, 3)
+    truth = trimesh.Trimesh(phantom1.surface, phantom1.faces, process=False)
+    moved = phantom1.landmarks[idx] + np.random.default_rng(0).normal(0.0, 4.0, (len(idx), 3))
+    (tmp_path / "lm.json").write_text(json.dumps({"points": truth.nearest.on_surface(moved)[0].tolist(), "template_index": idx.tolist()}))
+    codes, err = design_flags(tmp_path, phantom1, "--landmarks", tmp_path / "lm.json")
+    assert codes == ["landmark_spread_mm"], err
+    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert fit["registration"]["landmark_weight_factor"] == pytest.approx(0.1)
+    assert fit["quality"]["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
 
 
 def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):

@@ -1,14 +1,18 @@
 """Non-rigid registration: the paper's elastic ICP of the similarity-aligned template onto the scan.
 
-Three additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
+Four additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
 the face's proportions, so that the elastic stage finds only local shape); detected landmarks
 (MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
 landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
-to ~1 mm (a user's landmarks keep the paper's weight); and coarse gates: at the stiffest level pairs
-up to 15 mm and 60 deg apart are kept, the gates narrowing with the stiffness (halved with it) to
-the paper's 5 mm and 25 deg, so that a part of the face far from the template (a chin 6-10 mm
-off and tilted) is pulled in while the membrane is stiff instead of being left out. With all three
-off (`affine=None`, `detected_landmark_factor=1`, `coarse_gates=None`) this is the paper's method.
+to ~1 mm. A user's landmarks are registered with that weight first and earn the paper's weight
+(a second registration) only if they lie within a median user_trust_mm of their places on that
+face: landmarks placed to ~1 mm do (1.3-2.0 mm on the benches), MediaPipe's do not (2.1-3.4 mm),
+and a careless file must not drag the seal along the skin where the geometry cannot pull it back.
+And coarse gates: at the stiffest level pairs up to 15 mm and 60 deg apart are kept, the gates
+narrowing with the stiffness (halved with it) to the paper's 5 mm and 25 deg, so that a part of
+the face far from the template (a chin 6-10 mm off and tilted) is pulled in while the membrane is
+stiff instead of being left out. With all four off (`affine=None`, `detected_landmark_factor=1`,
+`user_trust_mm=inf`, `coarse_gates=None`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
 (2) reject pairs > 5 mm apart, with normals > 25 deg apart (coarse gates: wider while stiff), or on the scan's boundary;
@@ -30,7 +34,7 @@ handful of times, reusing the symbolic analysis) and each iteration is three bac
 """
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import qdldl
@@ -62,6 +66,7 @@ class NonrigidParams:
     correspondence: str = "auto"
     min_landmark_confidence: float = 0.5
     detected_landmark_factor: float = 0.1
+    user_trust_mm: float = 2.2
     affine: AffineParams | None = AffineParams()
     coarse_gates: tuple[float, float] | None = (15.0, 60.0)
 
@@ -83,13 +88,18 @@ class Registration:
     """The warped template (template vertex order, mm, scan frame).
 
     vertices: (n, 3); residual: (n,) distance (mm) to the matched scan point in the last
-    iteration, point-to-plane (NaN where unmatched); valid: (n,) matched in the last iteration; log: per iteration.
+    iteration, point-to-plane (NaN where unmatched); valid: (n,) matched in the last iteration; log: per iteration;
+    landmark_factor: the share of the paper's landmark weight used; landmark_spread_mm: median distance
+    (mm) of the trusted landmarks to their template vertices on the face registered at the detected
+    landmarks' weight (NaN without landmarks).
     """
 
     vertices: np.ndarray
     residual: np.ndarray
     valid: np.ndarray
     log: tuple = field(default_factory=tuple)
+    landmark_factor: float = 1.0
+    landmark_spread_mm: float = np.nan
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -112,18 +122,29 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, vf: csr_matrix | Non
 def register(
     aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: Landmarks | None, params: NonrigidParams = NonrigidParams()
 ) -> Registration:
-    """Warp the similarity-aligned template (n, 3) mm onto the scan."""
+    """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
+    weight if they agree with the face registered at the detected landmarks' (see above)."""
+    lm_index, lm_target = _landmark_targets(landmarks, params)
+    first = _register(aligned, faces, scan, (lm_index, lm_target), params.detected_landmark_factor, params)
+    spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
+    if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
+        return replace(_register(aligned, faces, scan, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
+    return replace(first, landmark_spread_mm=spread)
+
+
+def _register(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
+    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's weight."""
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
     lap = laplacian(aligned, faces)
     start = _affine_start(aligned, normals, target, params)
-    lm_index, lm_target = _landmark_targets(landmarks, params)
+    lm_index, lm_target = landmarks
     selector = np.zeros(len(aligned))
     selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
-    mu, lam = params.membrane, _landmark_weight(landmarks, params)
+    mu, lam = params.membrane, params.landmark * factor
     system = _System(w_data, lap, selector, mu, lam)
     disp = np.zeros_like(aligned)
     log = []
@@ -149,7 +170,7 @@ def register(
     final = start + disp
     m = match(target, final, vertex_normals(final, faces, vf), params.max_distance_mm, params.max_normal_deg)
     residual = np.where(m.valid, _plane_distance(final, m, target), np.nan)
-    return Registration(final, residual, m.valid, tuple(log))
+    return Registration(final, residual, m.valid, tuple(log), factor)
 
 
 def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
@@ -159,12 +180,6 @@ def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
         return params.max_distance_mm, params.max_normal_deg
     stiffness = mu / params.membrane
     return max(params.max_distance_mm, params.coarse_gates[0] * stiffness), max(params.max_normal_deg, params.coarse_gates[1] * stiffness)
-
-
-def _landmark_weight(landmarks: Landmarks | None, params: NonrigidParams) -> float:
-    """The landmark term's weight: the paper's for a user's landmarks, scaled for detected ones."""
-    user = landmarks is None or landmarks.path == "user"
-    return params.landmark * (1.0 if user else params.detected_landmark_factor)
 
 
 def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, params: NonrigidParams) -> np.ndarray:

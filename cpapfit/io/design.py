@@ -74,7 +74,9 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         **assess_design(d, scan).record(),  # rescan_advised, warnings, quality
         "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points)},
         "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
-                         "residual_median_mm": float(np.median(reg.residual[reg.valid]))},
+                         "residual_median_mm": float(np.median(reg.residual[reg.valid])),
+                         "landmark_weight_factor": reg.landmark_factor,
+                         "landmark_spread_mm": None if np.isnan(reg.landmark_spread_mm) else round(reg.landmark_spread_mm, 3)},
         "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
         "cushion": {**mask_dimensions(d), **d.checks},
         "fit_before_compression": d.rim.summary(),
