@@ -62,7 +62,7 @@ def main() -> None:
                 rim, surface = rim_points(scan, d)
                 covered = d.rim.covered
                 on_skin, to_truth, _ = trimesh.proximity.closest_point(truth, rim)
-                floor = rim_gap(on_skin, scan, surface).gap
+                floor = rim_gap(on_skin, d.contact.normals_at(rim), scan, surface).gap
                 print(f"| phantom {seed} | {mask} | {stats(d.rim.gap[covered])} | {stats(to_truth[covered])} | "
                       f"{stats(floor[covered])} | {closest(surface, rim)[covered].max():.3f} |", flush=True)
     for name in ("fran_cyberware/fran.obj", "rgbd_truedepth_mannequin"):

@@ -54,6 +54,10 @@ class Contact:
     def __post_init__(self):
         freeze_arrays(self)
 
+    def normals_at(self, points: np.ndarray) -> np.ndarray:
+        """(K, 3) the skin normals at the seal curve's points nearest (K, 3) `points` (mm)."""
+        return self.normals[cKDTree(self.curve).query(points)[1]]
+
 
 def closed_resample(points: np.ndarray, n: int, values: np.ndarray | None = None) -> np.ndarray:
     """n stations evenly spaced by arc length along a closed polyline (K, 3): the (n, 3) points

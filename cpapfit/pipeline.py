@@ -119,7 +119,8 @@ def design(
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
     on_stage("cushion")
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
-    rim = rim_gap(neutral.grid(256, 2)[:, 0], scan, face.scan)
+    edge = neutral.grid(256, 2)[:, 0]
+    rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
     require_quality(assess(scan, al.landmarks, reg, contact, rim))  # or refuse: rescan
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)

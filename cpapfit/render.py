@@ -46,12 +46,21 @@ class Hits:
         return self.triangle >= 0
 
 
-def raycast(vertices: np.ndarray, faces: np.ndarray, intrinsics: Intrinsics) -> Hits:
-    """Cast one ray per pixel centre from the camera origin onto an (N, 3) mm camera-frame mesh."""
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
+def unit_rays(intrinsics: Intrinsics) -> np.ndarray:
+    """(H * W, 3) unit directions of the pixel centres' rays, camera frame, row by row."""
     rays = pixel_rays(intrinsics).reshape(-1, 3)
-    dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
-    tri = RayMeshIntersector(mesh).intersects_first(np.zeros_like(dirs), dirs).astype(np.int64)
+    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+def raycast(vertices: np.ndarray, faces: np.ndarray, intrinsics: Intrinsics, first: np.ndarray | None = None) -> Hits:
+    """Cast one ray per pixel centre from the camera origin onto an (N, 3) mm camera-frame mesh.
+    first: the (H * W,) triangle each ray meets first (-1: none), if already cast (in any frame:
+    a mesh's Embree scene is then built once for many views)."""
+    rays = pixel_rays(intrinsics).reshape(-1, 3)
+    dirs = unit_rays(intrinsics)
+    if first is None:
+        first = RayMeshIntersector(trimesh.Trimesh(vertices, faces, process=False)).intersects_first(np.zeros_like(dirs), dirs)
+    tri = np.asarray(first, dtype=np.int64)
     shape = (intrinsics.height, intrinsics.width)
     bary = np.zeros((len(rays), 3))
     depth = np.full(len(rays), np.nan)
@@ -108,12 +117,15 @@ def shade(
     light: np.ndarray = LIGHT,
     ambient: float = 0.35,
     background: np.ndarray = BACKGROUND,
+    normals: np.ndarray | None = None,
 ) -> np.ndarray:
     """(H, W, 3) uint8 Lambert-shaded image of a mesh, albedo in [0, 1] per vertex (N, 3) or per pixel (H, W, 3).
 
-    `light` is the direction from the surface towards the light in the camera frame.
+    `light` is the direction from the surface towards the light in the camera frame; `normals`:
+    the (N, 3) vertex normals in the camera frame, if known (else computed from the mesh).
     """
-    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    if normals is None:
+        normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
     n = interpolate(hits, faces, np.asarray(normals))
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
     to_light = light / np.linalg.norm(light)

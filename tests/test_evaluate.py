@@ -120,8 +120,8 @@ def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points(
     grid = np.stack(np.meshgrid(np.arange(-40, 41, 4.0), np.arange(-40, 41, 4.0)), -1).reshape(-1, 2)
     cloud = Scan(np.column_stack([grid, np.zeros(len(grid))]), np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1)))
     midway = np.column_stack([grid[:40] + 2.0, np.full(40, 0.2)])
-    assert rim_gap(midway, cloud, None).gap == pytest.approx(np.full(40, 0.2), abs=1e-9)
-    assert rim_gap(midway + [0, 0, 8.8], cloud, None).gap.min() >= 9.0
+    assert rim_gap(midway, None, cloud, None).gap == pytest.approx(np.full(40, 0.2), abs=1e-9)
+    assert rim_gap(midway + [0, 0, 8.8], None, cloud, None).gap.min() >= 9.0
 
 
 def test_a_rim_over_a_mesh_is_measured_to_the_skin_under_its_flange_not_one_stray_sample():
@@ -141,8 +141,9 @@ def test_a_rim_over_a_mesh_is_measured_to_the_skin_under_its_flange_not_one_stra
     surface = trimesh.Trimesh(vertices, faces, process=False)
     rim = vertices[stray.ravel()] * [1, 1, 0]
     assert trimesh.proximity.closest_point(surface, rim)[1].min() >= 0.3
-    assert rim_gap(rim, scan, surface).gap.max() <= 0.01
-    assert rim_gap(rim + [0, 0, 2], scan, surface).gap == pytest.approx(np.full(len(rim), 2.0), abs=0.01)
+    up = np.tile([0.0, 0.0, 1.0], (len(rim), 1))
+    assert rim_gap(rim, up, scan, surface).gap.max() <= 0.01
+    assert rim_gap(rim + [0, 0, 2], up, scan, surface).gap == pytest.approx(np.full(len(rim), 2.0), abs=0.01)
 
 
 def test_a_rim_over_no_scanned_skin_is_refused_in_words():

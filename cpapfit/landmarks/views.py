@@ -6,8 +6,10 @@ once a face is found, it is rendered again from straight in front, upright and f
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+from trimesh.ray.ray_pyembree import RayMeshIntersector
 
-from ..render import interpolate, raycast, sample_texture, shade
+from ..render import interpolate, raycast, sample_texture, shade, unit_rays
 from ..scan import Intrinsics, Scan
 
 SIZE = (640, 480)
@@ -66,15 +68,24 @@ def _view(rotation: np.ndarray, centre: np.ndarray, extent: float) -> View:
     return View(rotation, centre, distance, Intrinsics(SIZE[0], SIZE[1], f, f, (SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2))
 
 
-def render_view(scan: Scan, view: View) -> tuple[np.ndarray, np.ndarray]:
-    """(image (H, W, 3) uint8, depth (H, W) mm NaN where empty) of a mesh scan seen from a view."""
+def intersector(scan: Scan) -> RayMeshIntersector:
+    """A mesh scan's Embree scene, in its own frame: built once, it serves every view of it."""
+    return RayMeshIntersector(trimesh.Trimesh(scan.vertices, scan.faces, process=False))
+
+
+def render_view(scan: Scan, view: View, scene: RayMeshIntersector) -> tuple[np.ndarray, np.ndarray]:
+    """(image (H, W, 3) uint8, depth (H, W) mm NaN where empty) of a mesh scan seen from a view;
+    `scene`: its `intersector` (the rays are cast in the scan's frame)."""
+    dirs = unit_rays(view.intrinsics) @ view.rotation
+    first = scene.intersects_first(np.tile(view.to_scan(np.zeros((1, 3))), (len(dirs), 1)), dirs)
     vertices = view.to_camera(scan.vertices)
-    hits = raycast(vertices, scan.faces, view.intrinsics)
+    hits = raycast(vertices, scan.faces, view.intrinsics, first)
     if scan.texture is not None:
         albedo, ambient = sample_texture(hits, scan.faces, scan.uv, scan.texture), 0.6
     elif scan.colors is not None:
         albedo, ambient = interpolate(hits, scan.faces, scan.colors / 255.0), 0.6
     else:
         albedo, ambient = np.tile(SKIN, (len(vertices), 1)), 0.3
-    image = shade(hits, vertices, scan.faces, albedo, light=np.array([0.0, -0.3, -1.0]), ambient=ambient)
+    image = shade(hits, vertices, scan.faces, albedo, light=np.array([0.0, -0.3, -1.0]), ambient=ambient,
+                  normals=scan.normals @ view.rotation.T)
     return image, hits.depth
