@@ -1,7 +1,9 @@
-"""Wall-clock time of `cpapfit design` (the whole chain, as a user runs it) on a synthetic subject
-and on the shared fran scan (skipped without ../shared), with the CPU time of the run (its
-processes' user + system time, which other jobs on the machine change far less) and the load
-average when it started.
+"""Wall-clock time of `cpapfit design` (the whole chain, as a user runs it) on a synthetic subject,
+on that subject's surface as a dense mesh (1.6 M triangles, PLY in metres: a structured-light or
+photogrammetry scanner's output) and on the shared fran scan (skipped without ../shared), with
+the CPU time of the run (its processes' user + system time, which other jobs on the machine
+change far less), the load average when it started and the largest resident memory of any run
+so far.
 
 Usage: .venv/bin/python bench/design_time.py [--repeat N]
 """
@@ -17,6 +19,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import trimesh
+
+from cpapfit.phantom import make_phantom
+
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
@@ -30,6 +36,13 @@ def run(*args: str) -> tuple[float, float]:
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
+def dense_mesh(path: Path) -> None:
+    """Seed 3's true surface subdivided to 0.35 mm edges (~1.6 M triangles), written in metres."""
+    ph = make_phantom(3)
+    vertices, faces = trimesh.remesh.subdivide_to_size(ph.surface, ph.faces, 0.35)
+    trimesh.Trimesh(vertices / 1000.0, faces, process=False).export(path)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
@@ -37,7 +50,9 @@ def main() -> None:
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     with tempfile.TemporaryDirectory() as tmp:
         run("phantom", "--seed", "3", "--out", f"{tmp}/p3")
+        dense_mesh(Path(tmp) / "dense.ply")
         cases = [("phantom seed 3", f"{tmp}/p3", mask) for mask in ("nasal", "oronasal")]
+        cases.append(("phantom seed 3 as a dense mesh", f"{tmp}/dense.ply", "nasal"))
         if (SHARED / "fran_cyberware" / "fran.obj").exists():
             cases.append(("fran", str(SHARED / "fran_cyberware" / "fran.obj"), "nasal"))
         for name, scan, mask in cases:
@@ -46,7 +61,9 @@ def main() -> None:
                 load = os.getloadavg()[0]
                 wall, cpu = run("design", scan, "--mask", mask, "--out", f"{tmp}/out")
                 walls.append(wall)
-                print(f"cpapfit design {name} --mask {mask}: {wall:.1f} s (process start to exit), CPU {cpu:.1f} s, load {load:.1f}")
+                peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024**2
+                print(f"cpapfit design {name} --mask {mask}: {wall:.1f} s (process start to exit), CPU {cpu:.1f} s, "
+                      f"load {load:.1f}, peak memory so far {peak:.1f} GB")
             print(f"  {name} {mask}: best {min(walls):.1f} s, median {statistics.median(walls):.1f} s")
 
 
