@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 from PIL import Image
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from cpapfit.align.initial import initial_alignment
@@ -14,7 +15,7 @@ from cpapfit.errors import InputError
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.landmarks.fallback import fallback_alignment
+from cpapfit.landmarks.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
 from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.phantom import make_phantom
@@ -298,3 +299,14 @@ def test_a_template_misplaced_on_a_shaded_render_fails_the_face_check(tmp_path):
     assert not check_face(mesh, TEMPLATE, first.similarity, central_face(TEMPLATE)).is_face
     _, fit, check = initial_alignment(mesh, TEMPLATE)
     assert check.is_face and region_error(fit, ph.surface @ turn.T, ph.faces) <= 3.0
+
+
+def test_a_dense_scan_is_thinned_for_the_landmark_free_icp_to_one_point_a_cube():
+    """20 000 points in a 10 mm cube thinned to 1 mm cubes: at most one per cube, every point within
+    a cube's diagonal of a kept one, kept points in their original order."""
+    points = np.random.default_rng(0).uniform(0.0, 10.0, (20000, 3))
+    kept = thinned(points, 1.0)
+    assert len(np.unique(np.floor(kept), axis=0)) == len(kept) == 1000
+    assert cKDTree(kept).query(points)[0].max() <= np.sqrt(3.0)
+    order = cKDTree(points).query(kept)[1]
+    assert (np.diff(order) > 0).all()
