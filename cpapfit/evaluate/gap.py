@@ -14,7 +14,7 @@ from .rim import skin_under
 
 SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
 CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point is measured to its tangent plane
-NEAREST = 8  # a rim point is over the scan's edge if any of its this many nearest scan points is
+NEAREST = 8  # scan points around a rim point: the scan's normal there; over its edge if any of them is
 NORMAL_REACH_MM = 10.0  # a mesh's skin under a rim point is looked for along the normal from this far out
 
 
@@ -47,17 +47,21 @@ class RimGap:
 def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.Trimesh | trimesh.PointCloud) -> RimGap:
     """Distances from (K, 3) rim points to the scan (mm), and where the scan covers them (none of
     the NEAREST scan points is on a rim or hole of the scan). A mesh (`surface`: `scan_surface`): to
-    the skin under the flange along the (K, 3) unit skin `normals` (the registered face's, smooth
-    where the scan is noisy), as `evaluate.rim` measures it (`skin_under`); where no ray meets the
-    mesh, and for a point cloud: to the tangent plane at the nearest point, if within
-    CLOUD_REACH_MM (not the gaps between the points)."""
+    the skin under the flange, as `evaluate.rim` measures it (`skin_under`), along the scan's own
+    normal there (the mean of the NEAREST points' normals, turned to agree with the (K, 3) unit skin
+    `normals` of the registered face); where no ray meets the mesh, and for a point cloud: to the
+    tangent plane at the nearest point, if within CLOUD_REACH_MM (not the gaps between the points)."""
     tree = cKDTree(scan.vertices)
     plane = off_skin(scan, tree, rim, max(CLOUD_REACH_MM, SPACINGS * spacing(tree)))
     if scan.is_point_cloud:
         return RimGap(plane, np.ones(len(rim), dtype=bool))
-    gap = np.abs(skin_under(rim, surface, normals, NORMAL_REACH_MM))
+    nearest = tree.query(rim, k=NEAREST)[1]
+    around = scan.normals[nearest]  # (K, NEAREST, 3)
+    skin = (around * np.sign(np.einsum("knj,kj->kn", around, normals))[..., None]).sum(axis=1)
+    skin /= np.maximum(np.linalg.norm(skin, axis=1, keepdims=True), 1e-12)
+    gap = np.abs(skin_under(rim, surface, skin, NORMAL_REACH_MM))
     rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
-    return RimGap(np.where(np.isfinite(gap), gap, plane), ~rims[tree.query(rim, k=NEAREST)[1]].any(axis=1))
+    return RimGap(np.where(np.isfinite(gap), gap, plane), ~rims[nearest].any(axis=1))
 
 
 def spacing(tree: cKDTree, sample: int = 2000) -> float:
