@@ -146,6 +146,24 @@ def test_a_rim_over_a_mesh_is_measured_to_the_skin_under_its_flange_not_one_stra
     assert rim_gap(rim + [0, 0, 2], up, scan, surface).gap == pytest.approx(np.full(len(rim), 2.0), abs=0.01)
 
 
+def test_a_rim_over_a_hole_is_not_covered_by_a_stray_point_in_it():
+    """A plane with a 20 mm square hole holding nine points in no triangle (stray depth samples): the
+    rim over the hole is not over scanned skin; the rim over the plane is, 1 mm above it."""
+    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.scan import Scan
+
+    plane = trimesh.creation.box((100, 100, 2)).apply_translation((0, 0, -1))
+    plane = trimesh.Trimesh(*trimesh.remesh.subdivide_to_size(plane.vertices, plane.faces, 2.0), process=False)
+    keep = ~(np.abs(plane.triangles_center[:, :2]) < 10).all(axis=1)
+    stray = np.column_stack([np.stack(np.meshgrid([-0.5, 0, 0.5], [-0.5, 0, 0.5]), -1).reshape(-1, 2), np.zeros(9)])
+    vertices = np.vstack([plane.vertices, stray])
+    scan = Scan(vertices, plane.faces[keep], np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
+    rim = np.array([[0.0, 0.0, 1.0], [30.0, 30.0, 1.0]])
+    gap = rim_gap(rim, np.tile([0.0, 0.0, 1.0], (2, 1)), scan, trimesh.Trimesh(vertices, plane.faces[keep], process=False))
+    assert gap.covered.tolist() == [False, True]
+    assert gap.gap[1] == pytest.approx(1.0, abs=1e-6)
+
+
 def test_a_rim_over_no_scanned_skin_is_refused_in_words():
     """A cushion whose rim lies over none of the scan (placed off the face, or in another frame)."""
     plane = trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))

@@ -46,11 +46,12 @@ class RimGap:
 
 def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.Trimesh | trimesh.PointCloud) -> RimGap:
     """Distances from (K, 3) rim points to the scan (mm), and where the scan covers them (none of
-    the NEAREST scan points is on a rim or hole of the scan). A mesh (`surface`: `scan_surface`): to
-    the skin under the flange, as `evaluate.rim` measures it (`skin_under`), along the scan's own
-    normal there (the mean of the NEAREST points' normals, turned to agree with the (K, 3) unit skin
-    `normals` of the registered face); where no ray meets the mesh, and for a point cloud: to the
-    tangent plane at the nearest point, if within CLOUD_REACH_MM (not the gaps between the points)."""
+    the NEAREST scan points is on its `_edge`). A mesh (`surface`: `scan_surface`): to the skin
+    under the flange, as `evaluate.rim` measures it (`skin_under`), along the scan's own normal
+    there (the mean of the NEAREST points' normals, turned to agree with the (K, 3) unit skin
+    `normals` of the registered face). Where no ray meets the mesh within NORMAL_REACH_MM, and for
+    a point cloud: to the tangent plane at the nearest point, if within CLOUD_REACH_MM (not the
+    gaps between the points)."""
     tree = cKDTree(scan.vertices)
     plane = off_skin(scan, tree, rim, max(CLOUD_REACH_MM, SPACINGS * spacing(tree)))
     if scan.is_point_cloud:
@@ -60,8 +61,13 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
     skin = (around * np.sign(np.einsum("knj,kj->kn", around, normals))[..., None]).sum(axis=1)
     skin /= np.maximum(np.linalg.norm(skin, axis=1, keepdims=True), 1e-12)
     gap = np.abs(skin_under(rim, surface, skin, NORMAL_REACH_MM))
+    return RimGap(np.where(gap <= NORMAL_REACH_MM, gap, plane), ~_edge(scan)[nearest].any(axis=1))
+
+
+def _edge(scan: Scan) -> np.ndarray:
+    """(N,) bool: scan points on a rim or hole of its surface, or in no triangle (a stray point)."""
     rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
-    return RimGap(np.where(np.isfinite(gap), gap, plane), ~rims[nearest].any(axis=1))
+    return rims | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
 
 
 def spacing(tree: cKDTree, sample: int = 2000) -> float:
