@@ -254,7 +254,7 @@ def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1):
 def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
     """The phantom's alignment passes the face check; the same template shrunk to 0.57 about its
     nose tip (what MediaPipe on a shaded render once gave) still lies on skin, but not at an adult's size."""
-    from cpapfit.align.check import NOSE_TIP, check_face
+    from cpapfit.align.check import NOSE_TIP, check_face, require_face
     from cpapfit.align.similarity import Similarity
 
     ph = phantom1
@@ -266,6 +266,8 @@ def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
     small = Similarity(0.57 * fit.scale, fit.rotation, tip - 0.57 * fit.scale * fit.rotation @ TEMPLATE.vertices[NOSE_TIP])
     shrunk = check_face(scan, TEMPLATE, small, central_face(TEMPLATE))
     assert shrunk.coverage >= 0.5 and not shrunk.is_face and "scaled x0.5" in shrunk.describe()
+    with pytest.raises(InputError, match="are its units right"):
+        require_face(shrunk, "a render")
 
 
 def test_a_noisy_depth_camera_does_not_hide_the_face(tmp_path):

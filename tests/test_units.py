@@ -34,3 +34,12 @@ def test_outliers_do_not_decide_the_unit():
     pts = face_box(0.16)
     pts[:5] = 50.0  # a few stray points far away (1 % are ignored)
     assert decide_units(pts)[0] == "m"
+
+
+def test_inches_are_taken_when_stated_and_named_when_auto_could_mistake_them():
+    """An 8-inch face: stated, it is inches (25.4 mm each); auto reads it as 8 cm, and says how to state inches."""
+    assert decide_units(face_box(8.0), "in")[0] == "in"
+    unit, note = decide_units(face_box(8.0))
+    assert unit == "cm" and "--units in" in note
+    with pytest.raises(UnitsError, match="check the unit"):
+        decide_units(face_box(180.0), "in")

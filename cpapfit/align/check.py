@@ -127,4 +127,5 @@ def _first(heights) -> float:
 def require_face(check: FaceCheck, how: str) -> None:
     """Raise a clear error when the alignment does not lie on a face."""
     if not check.is_face:
-        raise InputError(f"no face found ({how}): {check.describe()}; is this a face scan, facing the sensor?")
+        units = "" if SCALE_RANGE[0] <= check.scale <= SCALE_RANGE[1] else " (or are its units right? state them with --units)"
+        raise InputError(f"no face found ({how}): {check.describe()}; is this a face scan, facing the sensor{units}?")

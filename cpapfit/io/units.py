@@ -4,8 +4,9 @@ import numpy as np
 
 from ..errors import UnitsError
 
-MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
-UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres"}
+MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches"}
+AUTO_UNITS = ("mm", "cm", "m")  # a face in inches is a face in centimetres too: inches must be stated
 # Largest robust extent of a scan of a face (and at most the head and shoulders), in mm.
 FACE_EXTENT_MM = (70.0, 600.0)
 
@@ -24,27 +25,28 @@ def _fits(extent: float, unit: str) -> bool:
 def decide_units(vertices: np.ndarray, stated: str = "auto") -> tuple[str, str]:
     """The unit of (N, 3) vertices and a sentence saying how it was decided.
 
-    `stated` is "auto" or one of MM_PER_UNIT. Auto picks the one unit in which the scan's robust
-    extent is the size of a face (70-600 mm; the ranges of the units do not overlap). A stated
+    `stated` is "auto" or one of MM_PER_UNIT. Auto picks the one of AUTO_UNITS in which the scan's
+    robust extent is the size of a face (70-600 mm; their ranges do not overlap). A stated
     unit that makes the face implausibly small or large is refused, as is a scan no unit fits.
     """
     extent = robust_extent(vertices)
     lo, hi = FACE_EXTENT_MM
     if stated != "auto":
         if stated not in MM_PER_UNIT:
-            raise UnitsError(f"unknown unit '{stated}': use mm, cm, m or auto")
+            raise UnitsError(f"unknown unit '{stated}': use mm, cm, m, in or auto")
         if not _fits(extent, stated):
             size = extent * MM_PER_UNIT[stated]
             raise UnitsError(
                 f"in {UNIT_NAMES[stated]} the scan is {size:.4g} mm across, but a face is {lo:.0f}-{hi:.0f} mm: "
-                "check the unit (--units mm|cm|m) or use --units auto"
+                "check the unit (--units mm|cm|m|in) or use --units auto"
             )
         return stated, f"units: {UNIT_NAMES[stated]} as stated ({extent * MM_PER_UNIT[stated]:.0f} mm across)"
-    for unit in MM_PER_UNIT:
+    for unit in AUTO_UNITS:
         if _fits(extent, unit):
             size = extent * MM_PER_UNIT[unit]
-            return unit, f"units: {UNIT_NAMES[unit]}, decided from the size ({extent:.4g} {unit} = {size:.0f} mm across)"
+            inches = " (a scan in inches: state --units in)" if unit == "cm" else ""
+            return unit, f"units: {UNIT_NAMES[unit]}, decided from the size ({extent:.4g} {unit} = {size:.0f} mm across){inches}"
     raise UnitsError(
         f"the scan is {extent:.4g} units across, which is the size of a face ({lo:.0f}-{hi:.0f} mm) in none of "
-        "mm, cm or m: is it a face scan? state the unit with --units"
+        "mm, cm or m: is it a face scan? state the unit with --units (mm, cm, m, in)"
     )
