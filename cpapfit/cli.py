@@ -4,7 +4,9 @@ Errors the user can cause are printed as one line on stderr with exit code 2, ne
 """
 
 import argparse
+import os
 import sys
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +31,7 @@ from .template import load_template
 
 EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
 EXIT_USER_ERROR = 2
+EXIT_INTERNAL_ERROR = 1
 
 
 def info(message: str) -> None:
@@ -303,6 +306,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("cpapfit: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug, not the input: still one line, and nothing half-written (writes are atomic)
+        if os.environ.get("CPAPFIT_TRACEBACK"):
+            traceback.print_exc()
+        print(f"cpapfit: internal error: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} -- nothing was written for "
+              "this step; please report it with the scan (CPAPFIT_TRACEBACK=1 prints the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL_ERROR
 
 
 if __name__ == "__main__":

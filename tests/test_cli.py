@@ -126,6 +126,22 @@ def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path,
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_a_bug_gives_one_line_and_writes_nothing(cli, tmp_path, phantom1_dir, monkeypatch):
+    """An unexpected exception inside a stage (a bug, not the input): exit 1, one line saying so and
+    what to do, no traceback, no output."""
+    import cpapfit.pipeline as pipeline
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("a stage broke")
+
+    monkeypatch.setattr(pipeline, "register_template", broken)
+    out = tmp_path / "out"
+    code, _, err = cli("design", phantom1_dir, "--mask", "nasal", "--out", out, "--quiet")
+    assert code == 1 and "Traceback" not in err
+    assert err.strip().splitlines() == [err.strip()] and err.startswith("cpapfit: internal error: RuntimeError: a stage broke")
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_console_entry_point_prints_no_traceback(tmp_path):
     res = subprocess.run(
         [sys.executable, "-m", "cpapfit", "inspect", str(tmp_path / "missing.obj")], capture_output=True, text=True

@@ -183,3 +183,18 @@ def test_input_hash_and_date(phantom1_dir, tmp_path, monkeypatch):
     assert input_sha256(folder) != input_sha256(phantom1_dir)
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
     assert run_date() == "2023-11-14 22:13 UTC"
+
+
+def test_the_viewer_decimates_a_dense_face_it_was_handed_read_only():
+    """A stage's frozen (read-only) arrays, 20 480 triangles: the 3-D view keeps at most 1 000, all
+    within 1 mm of the sphere they came from (a dense scan once crashed the report here)."""
+    import trimesh
+
+    from cpapfit.report.frame import Face
+    from cpapfit.report.viewer import viewer_face
+
+    sphere = trimesh.creation.icosphere(5, radius=50.0)
+    face = Face(np.array(sphere.vertices), np.array(sphere.faces, dtype=np.int64))
+    shown = viewer_face(face, np.zeros(3), 200.0, 1000)
+    assert 0 < len(shown.faces) <= 1000
+    assert np.abs(np.linalg.norm(shown.vertices, axis=1) - 50.0).max() <= 1.0
