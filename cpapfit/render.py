@@ -46,6 +46,35 @@ class Hits:
         return self.triangle >= 0
 
 
+@dataclass(frozen=True)
+class Scene:
+    """A triangle mesh to be seen from many cameras (mm, its own frame): (N, 3) vertices, (M, 3)
+    faces, (N, 3) unit vertex normals and its Embree scene, built once."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    intersector: RayMeshIntersector
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+
+def scene_of(vertices: np.ndarray, faces: np.ndarray) -> Scene:
+    """The `Scene` of an (N, 3) mm mesh: its Embree scene and area-weighted vertex normals."""
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    return Scene(vertices, faces, np.array(mesh.vertex_normals), RayMeshIntersector(mesh))
+
+
+def look(scene: Scene, view) -> tuple[Hits, np.ndarray, np.ndarray]:
+    """A scene seen from a `view` (`landmarks.views.View`: rays cast in the scene's own frame):
+    (hits, (N, 3) camera-frame vertices, (N, 3) camera-frame normals)."""
+    dirs = unit_rays(view.intrinsics) @ view.rotation
+    first = scene.intersector.intersects_first(np.tile(view.to_scan(np.zeros((1, 3))), (len(dirs), 1)), dirs)
+    vertices = view.to_camera(scene.vertices)
+    return raycast(vertices, scene.faces, view.intrinsics, first), vertices, scene.normals @ view.rotation.T
+
+
 def unit_rays(intrinsics: Intrinsics) -> np.ndarray:
     """(H * W, 3) unit directions of the pixel centres' rays, camera frame, row by row."""
     rays = pixel_rays(intrinsics).reshape(-1, 3)

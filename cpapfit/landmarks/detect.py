@@ -21,7 +21,8 @@ from ..template import N_LANDMARKS, Template
 from .facemesh import detect_rotations
 from .lift import lift
 from .types import Landmarks
-from .views import axis_views, face_view, intersector, render_view
+from ..render import scene_of
+from .views import axis_views, face_view, render_view
 
 MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
 MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the similarity
@@ -54,7 +55,7 @@ def sights(scan: Scan) -> list[Sight]:
         return [] if scan.image is None else [Sight(scan.image, scan.depth, scan.intrinsics, lambda p: p, "colour image")]
     if scan.is_point_cloud:
         return []
-    out, scene = [], intersector(scan)
+    out, scene = [], scene_of(scan.vertices, scan.faces)
     for i, view in enumerate(axis_views(scan)):
         image, depth = render_view(scan, view, scene)
         out.append(Sight(image, depth, view.intrinsics, view.to_scan, f"render view {i}"))
@@ -74,7 +75,7 @@ def detect_landmarks(scan: Scan, template: Template) -> Detection | None:
 def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detection | None:
     """Detection on renders of a mesh scan from straight in front of the template placed by `pose`
     (FRONTAL_PASSES times, each from the last detection's pose), or None if none is found."""
-    best, scene = None, intersector(scan)
+    best, scene = None, scene_of(scan.vertices, scan.faces)
     for _ in range(FRONTAL_PASSES):
         view = face_view(pose.apply(template.landmarks), pose.rotation[:, 2], pose.rotation[:, 1])
         image, depth = render_view(scan, view, scene)

@@ -6,10 +6,8 @@ once a face is found, it is rendered again from straight in front, upright and f
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
-from trimesh.ray.ray_pyembree import RayMeshIntersector
 
-from ..render import interpolate, raycast, sample_texture, shade, unit_rays
+from ..render import Scene, interpolate, look, sample_texture, shade
 from ..scan import Intrinsics, Scan
 
 SIZE = (640, 480)
@@ -68,24 +66,15 @@ def _view(rotation: np.ndarray, centre: np.ndarray, extent: float) -> View:
     return View(rotation, centre, distance, Intrinsics(SIZE[0], SIZE[1], f, f, (SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2))
 
 
-def intersector(scan: Scan) -> RayMeshIntersector:
-    """A mesh scan's Embree scene, in its own frame: built once, it serves every view of it."""
-    return RayMeshIntersector(trimesh.Trimesh(scan.vertices, scan.faces, process=False))
-
-
-def render_view(scan: Scan, view: View, scene: RayMeshIntersector) -> tuple[np.ndarray, np.ndarray]:
+def render_view(scan: Scan, view: View, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """(image (H, W, 3) uint8, depth (H, W) mm NaN where empty) of a mesh scan seen from a view;
-    `scene`: its `intersector` (the rays are cast in the scan's frame)."""
-    dirs = unit_rays(view.intrinsics) @ view.rotation
-    first = scene.intersects_first(np.tile(view.to_scan(np.zeros((1, 3))), (len(dirs), 1)), dirs)
-    vertices = view.to_camera(scan.vertices)
-    hits = raycast(vertices, scan.faces, view.intrinsics, first)
+    `scene`: the scan's (`render.scene_of`), built once for all its views."""
+    hits, vertices, normals = look(scene, view)
     if scan.texture is not None:
         albedo, ambient = sample_texture(hits, scan.faces, scan.uv, scan.texture), 0.6
     elif scan.colors is not None:
         albedo, ambient = interpolate(hits, scan.faces, scan.colors / 255.0), 0.6
     else:
         albedo, ambient = np.tile(SKIN, (len(vertices), 1)), 0.3
-    image = shade(hits, vertices, scan.faces, albedo, light=np.array([0.0, -0.3, -1.0]), ambient=ambient,
-                  normals=scan.normals @ view.rotation.T)
+    image = shade(hits, vertices, scan.faces, albedo, light=np.array([0.0, -0.3, -1.0]), ambient=ambient, normals=normals)
     return image, hits.depth

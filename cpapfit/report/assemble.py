@@ -13,6 +13,7 @@ from .. import __version__
 from ..align.nonrigid import Registration
 from ..contact import Contact
 from ..pipeline import Alignment, Design
+from ..render import scene_of
 from ..scan import Scan
 from ..template import load_template
 from ..work import at_once
@@ -135,8 +136,9 @@ def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submi
     sim, mask = d.alignment.similarity, d.contact.mask
     rims, window_kpa = evaluated_rims(d), d.fit_params.window_kpa
     face = scan_face(scan, d)
-    whole = shoot(face, whole_face_view(sim))
-    close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])))
+    scene = scene_of(face.vertices, face.faces)
+    whole = shoot(face, whole_face_view(sim), scene)
+    close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])), scene)
     cushion = Face(d.solid.vertices, d.solid.faces)
     early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close)
     later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)

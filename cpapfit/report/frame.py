@@ -10,7 +10,7 @@ from ..align.similarity import Similarity
 from ..frozen import freeze_arrays
 from ..landmarks.views import View
 from ..phantom import TEMPLATE_TO_CAMERA
-from ..render import raycast, shade
+from ..render import Scene, look, scene_of, shade
 from ..rgbd import project
 from ..scan import Intrinsics
 
@@ -75,12 +75,13 @@ class Shot:
         freeze_arrays(self)
 
 
-def shoot(face: Face, view: View) -> Shot:
-    """The face ray-cast and shaded from a view, on a white background."""
-    cam = view.to_camera(face.vertices)
-    hits = raycast(cam, face.faces, view.intrinsics)
+def shoot(face: Face, view: View, scene: Scene | None = None) -> Shot:
+    """The face ray-cast and shaded from a view, on a white background; `scene`: the face's geometry
+    (`render.scene_of`), when it is seen from more than one view."""
+    hits, cam, normals = look(scene_of(face.vertices, face.faces) if scene is None else scene, view)
     albedo = np.tile(GREY_SKIN, (len(cam), 1)) if face.albedo is None else face.albedo
-    image = shade(hits, cam, face.faces, albedo, light=np.array([-0.2, -0.3, -1.0]), ambient=0.45, background=BACKGROUND)
+    image = shade(hits, cam, face.faces, albedo, light=np.array([-0.2, -0.3, -1.0]), ambient=0.45, background=BACKGROUND,
+                  normals=normals)
     return Shot(view, image, hits.depth)
 
 

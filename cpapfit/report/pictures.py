@@ -11,7 +11,7 @@ from matplotlib.figure import Figure
 from ..align.similarity import Similarity
 from ..landmarks.types import Landmarks
 from ..phantom import TEMPLATE_TO_CAMERA
-from ..render import raycast, shade
+from ..render import raycast, scene_of, shade
 from ..scan import Intrinsics
 from ..template import Template
 from .draw import draw_dots, draw_loop
@@ -94,7 +94,8 @@ def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similar
     both = Face(np.vstack([face.vertices, vertices]), np.vstack([face.faces, faces + len(face.vertices)]),
                 np.vstack([skin, np.tile(CUSHION_COLOUR, (len(vertices), 1))]))
     extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(vertices, axis=0).max()))
-    images = [shoot(both, face_view(similarity, vertices.mean(axis=0), extent, yaw)).image for yaw in (0.0, 50.0)]
+    scene = scene_of(both.vertices, both.faces)
+    images = [shoot(both, face_view(similarity, vertices.mean(axis=0), extent, yaw), scene).image for yaw in (0.0, 50.0)]
     return panels_png(images, ["front", "turned 50° (patient's right side)"], "The custom cushion on the face")
 
 
