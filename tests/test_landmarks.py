@@ -312,3 +312,28 @@ def test_a_dense_scan_is_thinned_for_the_landmark_free_icp_to_one_point_a_cube()
     assert cKDTree(kept).query(points)[0].max() <= np.sqrt(3.0)
     order = cKDTree(points).query(kept)[1]
     assert (np.diff(order) > 0).all()
+
+
+def test_a_head_and_shoulders_mesh_in_mm_is_read_and_its_face_found(tmp_path, phantom1):
+    """The face with the back of a head and a chest below it (~850 mm across, PLY in mm, turned):
+    read as millimetres, the face found (the aligned template's mask region within 3 mm of the
+    skin, the landmark bench's criterion) and the registered mask region within 1 mm of its true place."""
+    from cpapfit.pipeline import align, register_template
+
+    face = trimesh.Trimesh(phantom1.surface, phantom1.faces, process=False)
+    centre = face.vertices.mean(axis=0)
+    head, chest = trimesh.creation.icosphere(3), trimesh.creation.icosphere(3)
+    head.vertices = head.vertices * [80, 105, 95] + centre + [0, -5, 80]
+    head = trimesh.Trimesh(head.vertices, head.faces[head.triangles_center[:, 2] > centre[2] + 10], process=False)
+    chest.vertices = chest.vertices * [300, 420, 150] + centre + [0, 560, 90]  # camera frame: y down
+    bust = trimesh.util.concatenate([face, head, chest])
+    turn = Rotation.random(random_state=1).as_matrix()
+    bust.vertices = (bust.vertices - centre) @ turn.T
+    bust.export(tmp_path / "bust.ply")
+    scan = load_scan(tmp_path / "bust.ply")
+    assert scan.units == "mm" and np.ptp(scan.vertices, axis=0).max() > 600
+    al = align(scan)
+    truth = (phantom1.surface - centre) @ turn.T
+    assert al.check.is_face and region_error(al.similarity, truth, phantom1.faces) <= 3.0
+    registered = register_template(scan, al).vertices
+    assert np.linalg.norm(registered[REGION] - truth[REGION], axis=1).mean() <= 1.0

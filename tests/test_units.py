@@ -43,3 +43,14 @@ def test_inches_are_taken_when_stated_and_named_when_auto_could_mistake_them():
     assert unit == "cm" and "--units in" in note
     with pytest.raises(UnitsError, match="check the unit"):
         decide_units(face_box(180.0), "in")
+
+
+@pytest.mark.parametrize("unit,extent", [("mm", 900.0), ("m", 0.9)])
+def test_a_head_and_shoulders_scan_is_taken_in_mm_or_m(unit, extent):
+    """900 mm across (a bust): auto takes it in mm or m, where no unit makes it a face, and says so;
+    stated, it is accepted; past 2 m it is no face scan."""
+    decided, note = decide_units(face_box(extent))
+    assert decided == unit and "head and shoulders" in note
+    assert decide_units(face_box(extent), unit)[0] == unit
+    with pytest.raises(UnitsError):
+        decide_units(face_box(3 * extent), unit)
