@@ -131,7 +131,12 @@ def sample_texture(hits: Hits, faces: np.ndarray, uv: np.ndarray, texture: np.nd
     """(H, W, 3) albedo in [0, 1] looked up (nearest texel) in an (h, w, 3) uint8 texture at each hit.
 
     uv: (N, 2) per-vertex texture coordinates, origin at the image's bottom-left (OBJ/glTF as trimesh gives)."""
-    coords = interpolate(hits, faces, uv)
+    return texels(texture, interpolate(hits, faces, uv))
+
+
+def texels(texture: np.ndarray, coords: np.ndarray) -> np.ndarray:
+    """(..., 3) colour in [0, 1] of an (h, w, 3) uint8 texture at (..., 2) texture coordinates
+    (nearest texel; origin at the image's bottom-left)."""
     th, tw = texture.shape[:2]
     col = np.clip(np.round(coords[..., 0] * (tw - 1)), 0, tw - 1).astype(np.int64)
     row = np.clip(np.round((1.0 - coords[..., 1]) * (th - 1)), 0, th - 1).astype(np.int64)

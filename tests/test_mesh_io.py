@@ -47,6 +47,28 @@ def test_obj_texture_and_vertex_colours(tmp_path, face_m):
     assert scan.colors is not None and (scan.colors == [10, 200, 30]).all()
 
 
+def test_every_triangle_with_its_own_corners_is_joined_into_a_surface(tmp_path, face_m):
+    """A triangle soup (each triangle's corners stored apart, as some exporters write), coloured by
+    height: read as the surface it is, every corner at one place one vertex, colours kept; a
+    textured soup's colours come from its texture."""
+    corners = face_m.vertices[face_m.faces].reshape(-1, 3)
+    shade = np.round(255 * (corners[:, 1] - corners[:, 1].min()) / np.ptp(corners[:, 1])).astype(np.uint8)
+    colours = np.column_stack([shade, 255 - shade, np.full_like(shade, 30), np.full_like(shade, 255)])
+    trimesh.Trimesh(corners, np.arange(len(corners)).reshape(-1, 3), vertex_colors=colours, process=False).export(tmp_path / "soup.ply")
+    scan = load_scan(tmp_path / "soup.ply")
+    assert len(scan.vertices) == len(face_m.vertices) and len(scan.faces) == len(face_m.faces)
+    assert np.abs(scan.vertices[scan.faces] - 1000 * face_m.vertices[face_m.faces]).max() < 1e-4  # PLY stores float32
+    height = np.round(255 * (scan.vertices[:, 1] / 1000 - corners[:, 1].min()) / np.ptp(corners[:, 1]))
+    assert np.abs(scan.colors[:, 0].astype(float) - height).max() <= 1 and (scan.colors[:, 2] == 30).all()
+
+    tex = Image.fromarray(np.full((16, 16, 3), [200, 150, 120], dtype=np.uint8))
+    uv = np.full((len(corners), 2), 0.5)
+    textured = trimesh.Trimesh(corners, np.arange(len(corners)).reshape(-1, 3), visual=trimesh.visual.TextureVisuals(uv=uv, image=tex), process=False)
+    textured.export(tmp_path / "soup.obj")
+    scan = load_scan(tmp_path / "soup.obj")
+    assert len(scan.vertices) == len(face_m.vertices) and (scan.colors == [200, 150, 120]).all()
+
+
 def test_point_cloud_gets_outward_normals(tmp_path, face_m):
     trimesh.PointCloud(face_m.vertices).export(tmp_path / "cloud.ply")
     scan = load_scan(tmp_path / "cloud.ply")

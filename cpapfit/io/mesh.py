@@ -9,7 +9,8 @@ from scipy.spatial import cKDTree
 from ..errors import InputError
 from ..scan import Scan
 from .limits import check_complete, check_declared_size, check_size
-from .surface import check_surface
+from ..render import texels
+from .surface import MIN_SHARED_EDGES, check_surface, edge_use
 from .units import MM_PER_UNIT, decide_units
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
@@ -20,7 +21,7 @@ NORMAL_NEIGHBOURS = 16
 def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     """Read a mesh or point-cloud file into a `Scan` in millimetres (the file's own frame)."""
     geom = read_geometry(path)
-    vertices, faces, (colors, texture, uv) = _arrays(path, geom)
+    vertices, faces, (colors, texture, uv) = _welded(*_arrays(path, geom))
     _check(path, vertices, faces)
     unit, note = decide_units(vertices, units)
     vertices = vertices * MM_PER_UNIT[unit]
@@ -118,6 +119,25 @@ def _check_obj_tail(path: Path) -> None:
     unended = need and not tail.endswith((b"\n", b"\r"))
     if len(fields) - 1 < need or (fields[0] == "f" and fields[-1].endswith("/")) or unended:
         raise InputError(f"{path}: the last line '{lines[-1][:40]}' is cut short; the file is truncated")
+
+
+def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
+    """A triangle soup (every triangle with its own corners, as some exporters write) with the
+    corners at one position joined into one vertex, its colour their mean (a texture is sampled at
+    each corner first); any other mesh unchanged. Returns (vertices, faces, (colors, texture, uv))."""
+    if not len(faces) or (edge_use(faces) == 2).mean() >= MIN_SHARED_EDGES:
+        return vertices, faces, appearance
+    colors, texture, uv = appearance
+    rgb = texels(texture, uv) if texture is not None else None if colors is None else colors / 255.0
+    joined, first, index = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # the joined vertices in the file's order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    index = rank[index.ravel()]
+    if rgb is not None:
+        rgb = np.stack([np.bincount(index, rgb[:, k], len(order)) for k in range(3)], axis=1) / np.bincount(index)[:, None]
+        rgb = np.round(255.0 * rgb).astype(np.uint8)
+    return joined[order], index[faces], (rgb, None, None)
 
 
 def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
