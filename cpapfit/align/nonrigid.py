@@ -125,7 +125,8 @@ def register(
     """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
     weight if they agree with the face registered at the detected landmarks' (see above)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
-    first = _register(aligned, faces, scan, (lm_index, lm_target), params.detected_landmark_factor, params)
+    factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
+    first = _register(aligned, faces, scan, (lm_index, lm_target), factor, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
         return replace(_register(aligned, faces, scan, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
