@@ -7,9 +7,9 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
+from ..render import texels
 from ..scan import Scan
 from .limits import check_complete, check_declared_size, check_size
-from ..render import texels
 from .surface import MIN_SHARED_EDGES, check_surface, edge_use
 from .units import MM_PER_UNIT, decide_units
 
@@ -128,7 +128,9 @@ def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
     if not len(faces) or (edge_use(faces) == 2).mean() >= MIN_SHARED_EDGES:
         return vertices, faces, appearance
     colors, texture, uv = appearance
-    rgb = texels(texture, uv) if texture is not None else None if colors is None else colors / 255.0
+    rgb = colors / 255.0 if colors is not None else None
+    if texture is not None:
+        rgb = texels(texture, uv)
     joined, first, index = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)  # the joined vertices in the file's order
     rank = np.empty_like(order)
