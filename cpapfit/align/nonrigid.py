@@ -35,6 +35,7 @@ handful of times, reusing the symbolic analysis) and each iteration is three bac
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 import qdldl
@@ -125,22 +126,36 @@ def register(
     """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
     weight if they agree with the face registered at the detected landmarks' (see above)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
+    setup = _setup(aligned, faces, scan, params)  # both runs start from the same target and affine start
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
-    first = _register(aligned, faces, scan, (lm_index, lm_target), factor, params)
+    first = _register(aligned, faces, setup, (lm_index, lm_target), factor, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        return replace(_register(aligned, faces, scan, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
+        return replace(_register(aligned, faces, setup, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
     return replace(first, landmark_spread_mm=spread)
 
 
-def _register(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
-    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's weight."""
+class _Setup(NamedTuple):
+    """What the elastic ICP needs besides its landmarks: the incidence matrix, the scan as a
+    target, the membrane's Laplacian and the affine start (n, 3) mm."""
+
+    vf: csr_matrix
+    target: Target
+    lap: csr_matrix
+    start: np.ndarray
+
+
+def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, params: NonrigidParams) -> _Setup:
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
-    lap = laplacian(aligned, faces)
-    start = _affine_start(aligned, normals, target, params)
+    return _Setup(vf, target, laplacian(aligned, faces), _affine_start(aligned, normals, target, params))
+
+
+def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
+    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's weight."""
+    vf, target, lap, start = setup
     lm_index, lm_target = landmarks
     selector = np.zeros(len(aligned))
     selector[lm_index] = 1.0

@@ -133,9 +133,7 @@ def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
         rgb = texels(texture, uv)
     joined, first, index = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)  # the joined vertices in the file's order
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    index = rank[index.ravel()]
+    index = np.argsort(order)[index.ravel()]
     if rgb is not None:
         rgb = np.stack([np.bincount(index, rgb[:, k], len(order)) for k in range(3)], axis=1) / np.bincount(index)[:, None]
         rgb = np.round(255.0 * rgb).astype(np.uint8)

@@ -16,12 +16,12 @@ import numpy as np
 
 from ..align.similarity import Similarity, fit_similarity
 from ..errors import InputError
+from ..render import scene_of
 from ..scan import Intrinsics, Scan
 from ..template import N_LANDMARKS, Template
 from .facemesh import detect_rotations
 from .lift import lift
 from .types import Landmarks
-from ..render import scene_of
 from .views import axis_views, face_view, render_view
 
 MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
