@@ -8,8 +8,11 @@ stays: the seal must not be dragged to the hole's rim), so the cushion touches t
 rather than the template's approximation of it. For a point cloud, "along the normal" is its
 closest point at most TANGENT_MM sideways. "Onto the scan" means onto the skin the scan measures: a
 quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
-width SKIN_WIDTH_MM), so that the seal follows the face and not the sensor's noise or depth steps
-(a local moving-least-squares projection). Where the scan has no data the seal keeps the registered
+width SKIN_WIDTH_MM, widened to take in SKIN_NEIGHBOURS points where the scan is coarse), so that
+the seal follows the face and not the sensor's noise or depth steps (a local moving-least-squares
+projection). On such a scan each point's offset from the template then becomes the median over
+OUTLIER_SAMPLES scanned neighbours along the seal, so that one stray fit (a flying pixel, a depth
+step) cannot kink the seal. On a sparse mesh, too coarse to fit, the seal lands on the mesh itself. Where the scan has no data the seal keeps the registered
 template's guess, but not with a step at the data's edge: the offset the last scanned points took
 (scan minus template, along the normal) carries on into the gap and fades away over ~FADE_MM of
 seal; across a short hole it runs from one edge's offset to the other's.
@@ -20,7 +23,7 @@ from functools import lru_cache
 
 import numpy as np
 import trimesh
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, median_filter
 from scipy.spatial import cKDTree
 
 from .frozen import freeze_arrays
@@ -33,6 +36,8 @@ TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than thi
 SKIN_WIDTH_MM = 2.0  # Gaussian width of the local skin fit; scan points within twice this take part
 FADE_MM = 10.0  # arc length over which the scan's offset fades into a gap in the data
 SKIN_MIN_POINTS = 12  # fewer scan points than this around a seal point (a sparse mesh): keep its closest point
+SKIN_NEIGHBOURS = 60  # the skin fit reaches out to this many scan points (a coarse, noisy capture: wider)
+OUTLIER_SAMPLES = 5  # the seal's offsets onto the scan: a running median over this many scanned points
 
 
 @dataclass(frozen=True)
@@ -105,8 +110,11 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
     else:
         hit, near = _hit_along(points, normals, surface)
         sample = surface.vertices[np.unique(surface.faces)]
-    skin = local_skin(hit, normals, np.asarray(sample))
-    return np.where(near[:, None], skin, points), near
+    skin, fitted = local_skin(hit, normals, np.asarray(sample))
+    offset = np.einsum("ij,ij->i", skin - points, normals)
+    if near.any() and fitted[near].mean() >= 0.5:  # a scan dense enough to fit (noisy), not a sparse mesh's exact hits
+        offset[near] = median_filter(offset[near], size=min(OUTLIER_SAMPLES, int(near.sum())), mode="wrap")
+    return np.where(near[:, None], points + offset[:, None] * normals, points), near
 
 
 def faded_offsets(loop: np.ndarray, offset: np.ndarray, known: np.ndarray) -> np.ndarray:
@@ -152,23 +160,29 @@ def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: np.ndarray) -
     return cloud[idx], (dist <= PROJECT_MM) & (sideways <= TANGENT_MM)
 
 
-def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray) -> np.ndarray:
+def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) points moved along their (K, 3) unit normals onto a quadric height field fitted to the
-    (S, 3) scan points around each (Gaussian weights of width SKIN_WIDTH_MM); a point with fewer
-    than SKIN_MIN_POINTS scan points around it stays where it is. mm."""
+    (S, 3) scan points around each: its SKIN_NEIGHBOURS nearest, Gaussian weights of width
+    SKIN_WIDTH_MM or half the farthest one's distance across the skin if more; and (K,) which were
+    fitted. A point with fewer than SKIN_MIN_POINTS scan points within 2 SKIN_WIDTH_MM across the
+    skin (a sparse mesh) stays. mm."""
     out = points.copy()
-    tree = cKDTree(sample)
-    for k, around in enumerate(tree.query_ball_point(points, 2.0 * SKIN_WIDTH_MM)):
-        if len(around) >= SKIN_MIN_POINTS:
-            out[k] += _height(sample[around] - points[k], normals[k]) * normals[k]
-    return out
+    nearest = cKDTree(sample).query(points, k=min(SKIN_NEIGHBOURS, len(sample)))[1].reshape(len(points), -1)
+    offsets = sample[nearest] - points[:, None]  # (K, SKIN_NEIGHBOURS, 3)
+    height = np.einsum("knc,kc->kn", offsets, normals)
+    across = np.sqrt(np.maximum(np.sum(offsets**2, axis=2) - height**2, 0.0))
+    fitted = np.sum(across <= 2.0 * SKIN_WIDTH_MM, axis=1) >= SKIN_MIN_POINTS
+    for k in np.flatnonzero(fitted):
+        out[k] += _height(offsets[k], normals[k], max(SKIN_WIDTH_MM, np.linalg.norm(offsets[k], axis=1).max() / 2.0)) * normals[k]
+    return out, fitted
 
 
-def _height(offsets: np.ndarray, normal: np.ndarray) -> float:
-    """Height (mm, along the unit normal) at the origin of the quadric h(u, v) fitted to (S, 3) offsets."""
+def _height(offsets: np.ndarray, normal: np.ndarray, width: float) -> float:
+    """Height (mm, along the unit normal) at the origin of the quadric h(u, v) fitted to (S, 3)
+    offsets with Gaussian weights of `width` (mm)."""
     side = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
     side /= np.linalg.norm(side)
     u, v, h = offsets @ side, offsets @ np.cross(normal, side), offsets @ normal
-    root_w = np.exp(-(u**2 + v**2) / (4.0 * SKIN_WIDTH_MM**2))
+    root_w = np.exp(-(u**2 + v**2) / (4.0 * width**2))
     design = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v]) * root_w[:, None]
     return float(np.linalg.lstsq(design, h * root_w, rcond=None)[0][0])

@@ -46,6 +46,10 @@ class SensorModel:
         return np.asarray(z_mm) ** 2 / (f_px * self.baseline_mm) * self.disparity_step_px
 
 
+KINECT_V1 = SensorModel(noise_mm_at_500=0.4, baseline_mm=75.0, disparity_step_px=1.0 / 8.0, depth_scale=1000.0)
+"""A cheap structured-light camera (Kinect v1): sigma 1.6 mm and depth steps of ~2.9 mm at 1 m, depth in mm."""
+
+
 @dataclass(frozen=True)
 class Phantom:
     """A synthetic RGB-D capture and its truth.
@@ -74,15 +78,18 @@ class Phantom:
         return self.surface[:N_LANDMARKS]
 
 
-def make_phantom(seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None) -> Phantom:
+def make_phantom(
+    seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None
+) -> Phantom:
     """The synthetic subject of `seed`: same seed, same arrays, bit for bit. `yaw_deg` turns the
-    head by that yaw instead of the random one (everything else as for the seed)."""
+    head by that yaw, `distance_mm` sets it that far from the camera, instead of the random ones
+    (everything else as for the seed)."""
     rng = np.random.default_rng(seed)
     template = load_template()
     identity = random_identity(rng)
     face = apply_identity(template, identity)
     intrinsics = random_intrinsics(rng)
-    surface, pose = place_in_view(face, template, intrinsics, rng, yaw_deg)
+    surface, pose = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm)
     hits = raycast(surface, template.faces, intrinsics)
     image = colour_image(hits, surface, template, rng)
     depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
@@ -133,9 +140,12 @@ def random_intrinsics(rng: np.random.Generator) -> Intrinsics:
     return Intrinsics(640, 480, f, f, float(319.5 + rng.uniform(-6, 6)), float(239.5 + rng.uniform(-6, 6)))
 
 
-def place_in_view(face: np.ndarray, template: Template, intr: Intrinsics, rng: np.random.Generator, yaw_deg: float | None = None):
-    """Pose the face (yaw/pitch +-25 deg, roll +-15 deg; yaw `yaw_deg` if given) at 350-700 mm,
-    wholly inside the image.
+def place_in_view(
+    face: np.ndarray, template: Template, intr: Intrinsics, rng: np.random.Generator,
+    yaw_deg: float | None = None, distance_mm: float | None = None,
+):
+    """Pose the face (yaw/pitch +-25 deg, roll +-15 deg; yaw `yaw_deg` if given) at 350-700 mm
+    (`distance_mm` if given), wholly inside the image.
 
     Returns (surface (N, 3) mm camera frame, pose dict)."""
     yaw, pitch, roll = rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(-15, 15)
@@ -143,6 +153,7 @@ def place_in_view(face: np.ndarray, template: Template, intr: Intrinsics, rng: n
     head = Rotation.from_euler("yxz", [yaw, pitch, roll], degrees=True).as_matrix()
     rotation = TEMPLATE_TO_CAMERA @ head
     distance = float(rng.uniform(350.0, 700.0))
+    distance = distance if distance_mm is None else float(distance_mm)
     centre = template.landmarks[[6, 4, 152, 33, 263]].mean(axis=0)
     local = (face - centre) @ rotation.T
     uv = local[:, :2] / (local[:, 2:] + distance) * [intr.fx, intr.fy]  # pixel offsets from the principal point

@@ -19,7 +19,7 @@ from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
-from .quality import assess, require_quality
+from .quality import Quality, assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan, scan_surface
@@ -87,6 +87,7 @@ class Design:
     solid: object  # trimesh.Trimesh, checked
     checks: dict
     rim: RimGap  # the rim before its pressure-compensating pre-load, against the scan
+    quality: Quality  # the scan's quality gates (none refuses: else no design)
     preload: Preload  # the rim set into the skin along the axis, along the seal curve
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
     mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
@@ -121,7 +122,7 @@ def design(
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
     edge = neutral.grid(256, 2)[:, 0]
     rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
-    require_quality(assess(scan, al.landmarks, reg, contact, rim))  # or refuse: rescan
+    quality = require_quality(assess(scan, al.landmarks, reg, contact, rim))  # or refuse: rescan
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)
@@ -129,7 +130,7 @@ def design(
     moulding = submit(checked_mould, cushion, solid)
     fits = evaluate(face, al, solid, mask, params, fit_params)
     moulded = moulding.result()
-    return Design(al, reg, contact, cushion, solid, checks, rim, preload,
+    return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload,
                   moulded.parts, moulded.draft, fits, fit_params)
 
 

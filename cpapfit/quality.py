@@ -164,11 +164,6 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
     return Quality(tuple(gates))
 
 
-def assess_design(design, scan: Scan, params: QualityParams = QualityParams()) -> Quality:
-    """The gates of a pipeline `Design` made from `scan`."""
-    return assess(scan, design.alignment.landmarks, design.registration, design.contact, design.rim, params)
-
-
 def require_quality(quality: Quality) -> Quality:
     """The quality, or a QualityError naming the first gate that refuses."""
     if quality.refused:

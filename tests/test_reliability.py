@@ -28,7 +28,7 @@ from cpapfit.io.write import write_files
 from cpapfit.phantom import SensorModel, make_phantom, with_holes
 from cpapfit.evaluate.gap import RimGap
 from cpapfit.errors import QualityError
-from cpapfit.quality import QualityParams, assess, assess_design, longest_run, require_quality
+from cpapfit.quality import QualityParams, assess, longest_run, require_quality
 from cpapfit.template import load_template
 
 GATES = QualityParams()
@@ -148,7 +148,7 @@ def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp
     ph, d = designed
     write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
     scan = load_scan(tmp_path)
-    assert assess_design(d, scan).record()["quality"]["rim_gap_mm"] < GATES.rim_gap_flag_mm
+    assert d.quality.record()["quality"]["rim_gap_mm"] < GATES.rim_gap_flag_mm
     off_skin = RimGap(np.where(np.arange(256) < 60, 9.0, d.rim.gap), d.rim.covered | (np.arange(256) < 60))
     with pytest.raises(QualityError, match="rim stands up to 9.0 mm off the scanned skin"):
         require_quality(assess(scan, d.alignment.landmarks, d.registration, d.contact, off_skin))

@@ -9,7 +9,6 @@ from ..export import stl_bytes, threemf_bytes
 from ..evaluate.fit import FitParams
 from ..evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
 from ..pipeline import Design
-from ..quality import assess_design
 from ..scan import Scan
 from ..template import load_template
 from .write import json_bytes, ply_bytes
@@ -71,7 +70,7 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     fit = {
         "cpapfit_version": __version__, "units": "mm", "source": scan.source, "scan_units": scan.units,
         "mask": d.contact.mask,
-        **assess_design(d, scan).record(),  # rescan_advised, warnings, quality
+        **d.quality.record(),  # rescan_advised, warnings, quality
         "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points)},
         "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
                          "residual_median_mm": float(np.median(reg.residual[reg.valid])),
