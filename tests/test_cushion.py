@@ -169,21 +169,27 @@ def test_seal_points_over_a_hole_are_not_dragged_to_its_rim():
     assert np.allclose(moved[:2], points[:2]) and np.allclose(moved[2:], points[2:] - [0, 0, 0.5], atol=1e-9)
 
 
+def seal_on_sphere(seed: int, step: float, sigma: float, depth_step: float | None, ring: tuple[float, float]):
+    """Seal points 0.5 mm above a sphere of radius 80 mm seen as a 41 × 41 depth grid (`step` mm)
+    with σ `sigma` mm noise, quantised in `depth_step` mm if given, moved onto the scan along normals
+    at (ring[0] cos, ring[0] sin, ring[1]): their distances to the true sphere (mm), and which moved."""
+    rng = np.random.default_rng(seed)
+    n, radius = 41, 80.0
+    xy = np.stack(np.meshgrid((np.arange(n) - 20.0) * step, (np.arange(n) - 20.0) * step), -1).reshape(-1, 2)
+    z = np.sqrt(radius**2 - (xy**2).sum(axis=1)) + rng.normal(0.0, sigma, len(xy))
+    z = z if depth_step is None else np.round(z / depth_step) * depth_step
+    surface = scan_surface(Scan(np.column_stack([xy, z]), grid_faces(n), np.tile([0.0, 0.0, 1.0], (len(xy), 1))))
+    angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+    normals = np.column_stack([ring[0] * np.cos(angle), ring[0] * np.sin(angle), np.full(64, ring[1])])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    moved, on_scan = onto_scan((radius + 0.5) * normals, normals, surface)
+    return np.abs(np.linalg.norm(moved, axis=1) - radius), on_scan
+
+
 def test_seal_points_land_on_the_skin_not_on_the_sensor_noise():
     """A sphere of radius 80 mm seen as a 1 mm depth grid with σ 0.35 mm noise (a camera at 600 mm):
     seal points land within 0.12 mm of the true sphere on average (closest scan points: 0.22 mm)."""
-    rng = np.random.default_rng(7)
-    n, radius = 41, 80.0
-    xy = np.stack(np.meshgrid(np.arange(n) - 20.0, np.arange(n) - 20.0), -1).reshape(-1, 2)
-    z = np.sqrt(radius**2 - (xy**2).sum(axis=1))
-    noisy = np.column_stack([xy, z + rng.normal(0.0, 0.35, len(z))])
-    faces = grid_faces(n)
-    surface = scan_surface(Scan(noisy, faces, np.tile([0.0, 0.0, 1.0], (len(noisy), 1))))
-    angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
-    normals = np.column_stack([12 * np.cos(angle), 12 * np.sin(angle), np.full(64, 79.0)])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    moved, on_scan = onto_scan((radius + 0.5) * normals, normals, surface)
-    error = np.abs(np.linalg.norm(moved, axis=1) - radius)
+    error, on_scan = seal_on_sphere(7, 1.0, 0.35, None, (12.0, 79.0))
     assert on_scan.all()
     assert error.mean() <= 0.12 and error.max() <= 0.4
 
@@ -193,17 +199,7 @@ def test_seal_points_land_on_the_skin_under_a_cheap_cameras_depth_steps():
     2.9 mm steps): the fit widens to the coarse grid and a lone stray fit gives way to its
     neighbours, so seal points land within 0.45 mm of the sphere on average, at most 1.2 mm (a fit
     within 4 mm only, with no median along the seal: 0.84 and 3.5 mm)."""
-    rng = np.random.default_rng(0)
-    n, radius, step = 41, 80.0, 1.7
-    xy = np.stack(np.meshgrid((np.arange(n) - 20.0) * step, (np.arange(n) - 20.0) * step), -1).reshape(-1, 2)
-    z = np.sqrt(radius**2 - (xy**2).sum(axis=1))
-    stepped = np.column_stack([xy, np.round((z + rng.normal(0.0, 1.6, len(z))) / 2.9) * 2.9])
-    surface = scan_surface(Scan(stepped, grid_faces(n), np.tile([0.0, 0.0, 1.0], (len(stepped), 1))))
-    angle = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
-    normals = np.column_stack([20 * np.cos(angle), 20 * np.sin(angle), np.full(64, 77.0)])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    moved, on_scan = onto_scan((radius + 0.5) * normals, normals, surface)
-    error = np.abs(np.linalg.norm(moved, axis=1) - radius)
+    error, on_scan = seal_on_sphere(0, 1.7, 1.6, 2.9, (20.0, 77.0))
     assert on_scan.all()
     assert error.mean() <= 0.45 and error.max() <= 1.2
 
