@@ -173,9 +173,9 @@ def test_shared_real_scans_register(shared_data, name, cli, tmp_path):
 @pytest.mark.shared
 def test_fran_registers_the_same_when_its_last_bits_change(shared_data):
     """fran (a whole head) with every vertex moved by ~1e-4 mm: the registered mask region stays
-    within 0.3 mm of fran's own on average, 1 mm at most. The affine start slid the template down this face and stopped
-    wherever its iterations ran out: 2.5 mm apart on average, 7 mm at most, before the landmarks
-    pinned it."""
+    within 0.3 mm of fran's own on average, 1 mm at most. The affine start has two resting places
+    on this face; from the similarity of MediaPipe's own landmarks it ended in one or the other
+    by the last bits of the input: 2.5 mm apart on average, 7 mm at most."""
     scan = load_scan(shared_data / "fran_cyberware" / "fran.obj")
     nudged = replace(scan, vertices=scan.vertices + np.random.default_rng(0).normal(0.0, 1e-4, scan.vertices.shape))
     placed = [register_template(s, align(s)).vertices[REGION] for s in (scan, nudged)]

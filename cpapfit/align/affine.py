@@ -5,13 +5,8 @@ deeper than the template's), so that the elastic stage only has local shape left
 A trimmed ICP: each iteration pairs the moved template's vertices with the scan (the non-rigid
 stage's correspondences and rejections), keeps the closest `trim` of the pairs and solves the
 12 unknowns of the map by linear least squares (point-to-plane plus a little point-to-point, as the
-non-rigid stage weighs them), with the landmarks as point-to-point rows of weight `landmark`
-each. The map's principal stretches
+non-rigid stage weighs them). The map's principal stretches
 are then clamped to 1 +- max_stretch: adult faces differ from the template by ~10 %, not 50 %.
-
-Without the landmarks the map is not anchored along the skin: on a whole-head scan (fran) the
-template slid down the face over the iterations, and where it stopped depended on the last bits
-of the input (a 1e-4 mm change moved the registered mask region by 2.5 mm).
 """
 
 from dataclasses import dataclass
@@ -24,27 +19,23 @@ from .correspondences import Target, match
 @dataclass(frozen=True)
 class AffineParams:
     """iterations: ICP rounds; trim: fraction of closest pairs kept; max_stretch: bound of each
-    principal stretch's departure from 1 (dimensionless); landmark: weight of each landmark (a
-    scan pair's point-to-point weight is the non-rigid stage's, 0.1)."""
+    principal stretch's departure from 1 (dimensionless)."""
 
     iterations: int = 12
     trim: float = 0.9
     max_stretch: float = 0.2
-    landmark: float = 0.5
 
 
 def fit_affine(
     points: np.ndarray, normals: np.ndarray, target: Target, weights: tuple[float, float],
-    gates: tuple[float, float], params: AffineParams = AffineParams(), landmarks: tuple = (np.zeros(0, dtype=np.int64), np.zeros((0, 3))),
+    gates: tuple[float, float], params: AffineParams = AffineParams(),
 ) -> np.ndarray:
     """(3, 4) affine map [A | t] (mm) carrying (n, 3) points with unit normals onto the scan.
 
     weights: (point-to-point, point-to-plane); gates: the pair rejection (max distance mm, max
-    normal angle deg); landmarks: (indices (k,) into points, (k, 3) scan points they belong at).
-    Returns the identity map if too few pairs are found."""
+    normal angle deg). Returns the identity map if too few pairs are found."""
     centre = points.mean(axis=0)
     local = points - centre
-    pinned = (local[landmarks[0]], landmarks[1] - centre, params.landmark)
     linear, shift = np.eye(3), np.zeros(3)
     for _ in range(params.iterations):
         moved = local @ linear.T + shift + centre
@@ -55,7 +46,7 @@ def fit_affine(
             break
         c = target.vertices[m.index[keep]] - centre
         n = target.normals[m.index[keep]]
-        linear, shift = _clamp(*_solve(local[keep], c, n, weights, pinned), params.max_stretch)
+        linear, shift = _clamp(*_solve(local[keep], c, n, weights), params.max_stretch)
     return np.hstack([linear, (shift + centre - linear @ centre)[:, None]])
 
 
@@ -77,17 +68,14 @@ def _closest(m, moved: np.ndarray, target: Target, trim: float) -> np.ndarray:
     return i[dist <= np.quantile(dist, trim)]
 
 
-def _solve(p: np.ndarray, c: np.ndarray, n: np.ndarray, weights: tuple[float, float], pinned: tuple):
+def _solve(p: np.ndarray, c: np.ndarray, n: np.ndarray, weights: tuple[float, float]):
     """Least-squares (A, t) for A p + t ~ c: point-to-plane rows n . (A p + t - c), point-to-point
-    rows A p + t - c, and point-to-point rows of weight w for the `pinned` (p, c, w) landmarks
-    (unknowns row-major [A | t])."""
+    rows A p + t - c (unknowns row-major [A | t])."""
     w_pp, w_pl = weights
     ph = np.hstack([p, np.ones((len(p), 1))])
     rows = np.einsum("ki,kj->kij", n, ph).reshape(len(p), 12)  # n_i * ph_j at unknown (i, j)
-    lm_p, lm_c, w_lm = pinned
-    lm_ph = np.hstack([lm_p, np.ones((len(lm_p), 1))])
-    lhs = w_pl * rows.T @ rows + np.kron(np.eye(3), w_pp * ph.T @ ph + w_lm * lm_ph.T @ lm_ph)
-    rhs = w_pl * rows.T @ np.einsum("ki,ki->k", n, c) + (w_pp * c.T @ ph + w_lm * lm_c.T @ lm_ph).ravel()
+    lhs = w_pl * rows.T @ rows + w_pp * np.kron(np.eye(3), ph.T @ ph)
+    rhs = w_pl * rows.T @ np.einsum("ki,ki->k", n, c) + w_pp * (c.T @ ph).ravel()
     m = np.linalg.solve(lhs, rhs).reshape(3, 4)
     return m[:, :3], m[:, 3]
 

@@ -3,7 +3,8 @@
 Measures of the template's central face, carried by the similarity onto the scan:
 - gap: distance from each template point to the scan surface (point-to-plane at the nearest scan
   point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
-- nose: how far the scan rises at the nose tip above the scan 18 mm to either side of it and
+- nose: how far the scan rises at its nose tip (the middle of its top layer near the template's
+  tip, not one noise spike) above the scan 18 mm to either side of it and
   20 mm below it (farther out where a hole leaves no data there), along the face's forward
   direction (a face: 10-30 mm and 10-25 mm; a sphere, a wall: a few mm; the edge of a box: a
   ridge, but nothing below); each height is the upper quartile of the scan points within
@@ -30,6 +31,7 @@ COVER_MM = 10.0
 RIDGE_OFFSETS_MM = (18.0, 22.0, 26.0)  # probed in turn on each side: the first with scan data counts
 BELOW_OFFSETS_MM = (20.0, 25.0, 30.0)  # probed in turn: the first with scan data counts
 PEAK_SEARCH_MM = 15.0
+PEAK_LAYER_MM = 2.0  # the nose tip: the middle of the scan's top layer this thick
 PROBE_MM = 4.0
 TOP_LAYER_PERCENTILE = 75.0
 
@@ -81,9 +83,10 @@ def check_face(scan: Scan, template: Template, similarity: Similarity, central: 
     return FaceCheck(float(covered.mean()), gap, *_nose(tree, scan, template, similarity), float(similarity.scale))
 
 
-def _peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> np.ndarray:
-    """The most prominent scan point (along `forward`) within PEAK_SEARCH_MM of `near`, sideways:
-    the scan's own nose tip, wherever the alignment put the template's."""
+def nose_peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """The middle of the scan's top layer (along `forward`: within PEAK_LAYER_MM of its 98th
+    percentile height) within PEAK_SEARCH_MM of `near`, sideways: the scan's own nose tip,
+    wherever the alignment put the template's, and not a noise spike on it (mm)."""
     idx = tree.query_ball_point(near, r=PEAK_SEARCH_MM + 30.0)
     if not idx:
         return near
@@ -91,7 +94,10 @@ def _peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> n
     lateral = pts - near
     lateral -= np.outer(lateral @ forward, forward)
     pts = pts[np.linalg.norm(lateral, axis=1) < PEAK_SEARCH_MM]
-    return pts[np.argmax(pts @ forward)] if len(pts) else near
+    if not len(pts):
+        return near
+    height = pts @ forward
+    return pts[height >= np.percentile(height, 98) - PEAK_LAYER_MM].mean(axis=0)
 
 
 def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity) -> tuple[float, float]:
@@ -111,7 +117,7 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
         pts = scan.vertices[near][np.linalg.norm(lateral, axis=1) < PROBE_MM]
         return float(np.percentile(pts @ forward, TOP_LAYER_PERCENTILE)) if len(pts) else np.nan
 
-    tip = _peak(tree, scan, tip, forward)
+    tip = nose_peak(tree, scan, tip, forward)
     top = height(tip)
     sides = np.array([_first(height(tip + s * offset * side) for offset in RIDGE_OFFSETS_MM) for s in (-1.0, 1.0)])
     beside = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden

@@ -1,7 +1,7 @@
 """Non-rigid registration: the paper's elastic ICP of the similarity-aligned template onto the scan.
 
 Four additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
-the face's proportions, so that the elastic stage finds only local shape, pinned by the landmarks); detected landmarks
+the face's proportions, so that the elastic stage finds only local shape); detected landmarks
 (MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
 landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
 to ~1 mm. A user's landmarks are registered with that weight first and earn the paper's weight
@@ -126,7 +126,7 @@ def register(
     """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
     weight if they agree with the face registered at the detected landmarks' (see above)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
-    setup = _setup(aligned, faces, scan, (lm_index, lm_target), params)  # both runs start from the same target and affine start
+    setup = _setup(aligned, faces, scan, params)  # both runs start from the same target and affine start
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     first = _register(aligned, faces, setup, (lm_index, lm_target), factor, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
@@ -145,12 +145,12 @@ class _Setup(NamedTuple):
     start: np.ndarray
 
 
-def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams) -> _Setup:
+def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, params: NonrigidParams) -> _Setup:
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
-    return _Setup(vf, target, laplacian(aligned, faces), _affine_start(aligned, normals, target, landmarks, params))
+    return _Setup(vf, target, laplacian(aligned, faces), _affine_start(aligned, normals, target, params))
 
 
 def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
@@ -198,14 +198,13 @@ def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
     return max(params.max_distance_mm, params.coarse_gates[0] * stiffness), max(params.max_normal_deg, params.coarse_gates[1] * stiffness)
 
 
-def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, landmarks: tuple, params: NonrigidParams) -> np.ndarray:
-    """(n, 3) the similarity-aligned template stretched by the affine start, pinned by the
-    (template indices, scan points) `landmarks` (unchanged if params.affine is None)."""
+def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, params: NonrigidParams) -> np.ndarray:
+    """(n, 3) the similarity-aligned template stretched by the affine start (unchanged if params.affine is None)."""
     if params.affine is None:
         return aligned
     weights = (params.point_to_point, params.point_to_plane)
     gates = (params.max_distance_mm, params.max_normal_deg)
-    return apply_affine(fit_affine(aligned, normals, target, weights, gates, params.affine, landmarks), aligned)
+    return apply_affine(fit_affine(aligned, normals, target, weights, gates, params.affine), aligned)
 
 
 def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
