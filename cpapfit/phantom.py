@@ -79,16 +79,14 @@ class Phantom:
 
 
 def make_phantom(
-    seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None,
-    identity: dict | None = None,
+    seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None
 ) -> Phantom:
     """The synthetic subject of `seed`: same seed, same arrays, bit for bit. `yaw_deg` turns the
-    head by that yaw, `distance_mm` sets it that far from the camera, `identity` gives it that
-    face (`NEUTRAL`: the template's own), instead of the random ones (everything else as for the seed)."""
+    head by that yaw, `distance_mm` sets it that far from the camera, instead of the random ones
+    (everything else as for the seed)."""
     rng = np.random.default_rng(seed)
     template = load_template()
-    drawn = random_identity(rng)  # drawn all the same: the rest of the subject is the seed's
-    identity = drawn if identity is None else identity
+    identity = random_identity(rng)
     face = apply_identity(template, identity)
     intrinsics = random_intrinsics(rng)
     surface, pose = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm)
@@ -96,12 +94,6 @@ def make_phantom(
     image = colour_image(hits, surface, template, rng)
     depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
     return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, pose)
-
-
-NEUTRAL = {
-    "scale": 1.0, "face_width": 1.0, "face_height": 1.0, "nose_length": 1.0, "nose_width": 1.0, "nose_projection_mm": 0.0,
-    "cheek_fullness_mm": 0.0, "chin_forward_mm": 0.0, "chin_down_mm": 0.0, "bumps": [],
-}  # the template's own face
 
 
 def random_identity(rng: np.random.Generator) -> dict:

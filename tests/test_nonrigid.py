@@ -1,7 +1,5 @@
 """Non-rigid registration on synthetic subjects: fit, correspondence, holes, both lookup modes."""
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import trimesh
@@ -15,7 +13,7 @@ from cpapfit.io.write import write_files
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.metrics import flipped_triangles, mask_region, scan_to_template
 from cpapfit.phantom import make_phantom
-from cpapfit.pipeline import align, register_template
+from cpapfit.pipeline import align
 from cpapfit.rgbd import project
 from cpapfit.scan import Scan
 from cpapfit.template import load_template
@@ -168,19 +166,6 @@ def test_shared_real_scans_register(shared_data, name, cli, tmp_path):
     mesh, residual, valid = read_ply_attributes(tmp_path / "reg.ply")
     assert np.median(residual[valid == 1]) < 0.5  # mm
     assert 100 < np.ptp(mesh.vertices, axis=0).max() < 250  # fran in metres comes out in mm
-
-
-@pytest.mark.shared
-def test_fran_registers_the_same_when_its_last_bits_change(shared_data):
-    """fran (a whole head) with every vertex moved by ~1e-4 mm: the registered mask region stays
-    within 0.3 mm of fran's own on average, 1 mm at most. The affine start has two resting places
-    on this face; from the similarity of MediaPipe's own landmarks it ended in one or the other
-    by the last bits of the input: 2.5 mm apart on average, 7 mm at most."""
-    scan = load_scan(shared_data / "fran_cyberware" / "fran.obj")
-    nudged = replace(scan, vertices=scan.vertices + np.random.default_rng(0).normal(0.0, 1e-4, scan.vertices.shape))
-    placed = [register_template(s, align(s)).vertices[REGION] for s in (scan, nudged)]
-    apart = np.linalg.norm(placed[0] - placed[1], axis=1)
-    assert apart.mean() <= 0.3 and apart.max() <= 1.0
 
 
 def test_a_chin_far_from_the_template_is_pulled_in():

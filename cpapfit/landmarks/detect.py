@@ -118,28 +118,24 @@ def _refuse_two_faces(faces: list[np.ndarray], sight: Sight) -> None:
 
 
 def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndarray, note: str) -> Detection | None:
-    """Lift one detection, fit the template to it, drop hidden landmarks, refit; None if implausible.
-    The fits match each landmark to where the detector puts it on the template itself
-    (`Template.detector_offsets`), and the landmarks returned are moved by those offsets (scaled
-    and turned by the fit) to the places of the template's own landmark vertices."""
+    """Lift one detection, fit the template to it, drop hidden landmarks, refit; None if implausible."""
     cam, ok = lift(uv, sight.depth, sight.intrinsics)
     if ok.sum() < MIN_LANDMARKS:
         return None
     index = np.flatnonzero(ok)
-    seen_at = template.landmarks + template.detector_offsets
-    fit = fit_similarity(seen_at[index], cam[index])
+    fit = fit_similarity(template.landmarks[index], cam[index])
     facing = -(normals[index] @ fit.rotation.T)[:, 2]  # cos between template normal and the way to the camera
     if np.median(facing) < 0.3:  # the face looks away from this camera (e.g. the inside of a mesh)
         return None
     index = index[facing > FACING_COS]
     if len(index) < MIN_LANDMARKS:
         return None
-    fit = fit_similarity(seen_at[index], cam[index])
+    fit = fit_similarity(template.landmarks[index], cam[index])
     inliers = int((fit.weights > 0.5).sum())
     if inliers < MIN_INLIERS:
         return None
     # The similarity was fitted in camera coordinates; carry it and the points to the scan frame.
-    points = sight.to_scan(cam[index] - fit.scale * template.detector_offsets[index] @ fit.rotation.T)
+    points = sight.to_scan(cam[index])
     origin = sight.to_scan(np.zeros((1, 3)))[0]
     basis = sight.to_scan(np.eye(3)) - origin  # rows: camera axes in scan coordinates
     rotation = basis.T @ fit.rotation

@@ -27,16 +27,12 @@ class Template:
     vertices: (N, 3) float64 mm; faces: (M, 3) int64; vertex i < N_LANDMARKS is landmark i.
     regions: {"nasal" | "oronasal": ContactRegion}.
     features: {"lips" | "left_eye" | ...: (E, 2) int64 landmark edges} (MediaPipe's connections).
-    detector_offsets: (468, 3) float64 mm, template frame: where MediaPipe puts landmark i on views
-    of the template itself, less vertex i (`tools/calibrate_detector.py`; zero where it rarely
-    finds the landmark).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     regions: dict
     features: dict
-    detector_offsets: np.ndarray
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -70,8 +66,7 @@ def load_template() -> Template:
     marks = _data("contact_regions.json")
     regions = {m: contact_region(m, vertices, faces, marks[m]["anchors"], marks[m]["half_width_mm"]) for m in MASKS}
     features = {k: np.asarray(v, dtype=np.int64) for k, v in _data("canonical_face.json")["features"].items()}
-    offsets = np.asarray(_data("detector_offsets.json")["offsets_mm"], dtype=np.float64)
-    return Template(vertices=vertices, faces=faces, regions=regions, features=features, detector_offsets=offsets)
+    return Template(vertices=vertices, faces=faces, regions=regions, features=features)
 
 
 def central_face(template: Template, radius_mm: float = 60.0) -> np.ndarray:
