@@ -12,10 +12,11 @@ width SKIN_WIDTH_MM, widened to take in SKIN_NEIGHBOURS points where the scan is
 the seal follows the face and not the sensor's noise or depth steps (a local moving-least-squares
 projection). On such a scan each point's offset from the template then becomes the median over
 OUTLIER_SAMPLES scanned neighbours along the seal, so that one stray fit (a flying pixel, a depth
-step) cannot kink the seal. On a sparse mesh, too coarse to fit, the seal lands on the mesh itself. Where the scan has no data the seal keeps the registered
-template's guess, but not with a step at the data's edge: the offset the last scanned points took
-(scan minus template, along the normal) carries on into the gap and fades away over ~FADE_MM of
-seal; across a short hole it runs from one edge's offset to the other's.
+step) cannot kink the seal. On a sparse mesh, too coarse to fit, the seal lands on the mesh
+itself. Where the scan has no data the seal keeps the registered template's guess, but not with a
+step at the data's edge: the offset the last scanned points took (scan minus template, along the
+normal) carries on into the gap and fades away over ~FADE_MM of seal; across a short hole it runs
+from one edge's offset to the other's.
 """
 
 from dataclasses import dataclass
@@ -163,17 +164,19 @@ def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: np.ndarray) -
 def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) points moved along their (K, 3) unit normals onto a quadric height field fitted to the
     (S, 3) scan points around each: its SKIN_NEIGHBOURS nearest, Gaussian weights of width
-    SKIN_WIDTH_MM or half the farthest one's distance across the skin if more; and (K,) which were
-    fitted. A point with fewer than SKIN_MIN_POINTS scan points within 2 SKIN_WIDTH_MM across the
-    skin (a sparse mesh) stays. mm."""
+    SKIN_WIDTH_MM or half the farthest one's distance if more; and (K,) which were fitted. A point
+    with fewer than SKIN_MIN_POINTS scan points within 2 SKIN_WIDTH_MM across the skin (a sparse
+    mesh) stays. mm."""
     out = points.copy()
     nearest = cKDTree(sample).query(points, k=min(SKIN_NEIGHBOURS, len(sample)))[1].reshape(len(points), -1)
     offsets = sample[nearest] - points[:, None]  # (K, SKIN_NEIGHBOURS, 3)
     height = np.einsum("knc,kc->kn", offsets, normals)
-    across = np.sqrt(np.maximum(np.sum(offsets**2, axis=2) - height**2, 0.0))
+    distance_sq = np.sum(offsets**2, axis=2)
+    across = np.sqrt(np.maximum(distance_sq - height**2, 0.0))
     fitted = np.sum(across <= 2.0 * SKIN_WIDTH_MM, axis=1) >= SKIN_MIN_POINTS
+    widths = np.maximum(SKIN_WIDTH_MM, np.sqrt(distance_sq.max(axis=1)) / 2.0)
     for k in np.flatnonzero(fitted):
-        out[k] += _height(offsets[k], normals[k], max(SKIN_WIDTH_MM, np.linalg.norm(offsets[k], axis=1).max() / 2.0)) * normals[k]
+        out[k] += _height(offsets[k], normals[k], widths[k]) * normals[k]
     return out, fitted
 
 
