@@ -44,7 +44,7 @@ from scipy.sparse import csr_matrix, diags
 from ..frozen import freeze_arrays
 from ..landmarks.types import Landmarks
 from ..scan import Scan
-from .affine import AffineParams, apply_affine, fit_affine
+from .affine import AffineParams, apply_affine, fit_affine, starts_from
 from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
 
@@ -126,7 +126,7 @@ def register(
     """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
     weight if they agree with the face registered at the detected landmarks' (see above)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
-    setup = _setup(aligned, faces, scan, params)  # both runs start from the same target and affine start
+    setup = _setup(aligned, faces, scan, (lm_index, lm_target), params)  # both runs: one target, one affine start
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     first = _register(aligned, faces, setup, (lm_index, lm_target), factor, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
@@ -145,12 +145,12 @@ class _Setup(NamedTuple):
     start: np.ndarray
 
 
-def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, params: NonrigidParams) -> _Setup:
+def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams) -> _Setup:
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
-    return _Setup(vf, target, laplacian(aligned, faces), _affine_start(aligned, normals, target, params))
+    return _Setup(vf, target, laplacian(aligned, faces), _affine_start(aligned, normals, target, landmarks, params))
 
 
 def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
@@ -198,13 +198,16 @@ def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
     return max(params.max_distance_mm, params.coarse_gates[0] * stiffness), max(params.max_normal_deg, params.coarse_gates[1] * stiffness)
 
 
-def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, params: NonrigidParams) -> np.ndarray:
-    """(n, 3) the similarity-aligned template stretched by the affine start (unchanged if params.affine is None)."""
+def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, landmarks: tuple, params: NonrigidParams) -> np.ndarray:
+    """(n, 3) the similarity-aligned template stretched by the affine start, begun at the similarity
+    and at the trusted (template indices, (k, 3) scan points) `landmarks`' own map (unchanged if
+    params.affine is None)."""
     if params.affine is None:
         return aligned
     weights = (params.point_to_point, params.point_to_plane)
     gates = (params.max_distance_mm, params.max_normal_deg)
-    return apply_affine(fit_affine(aligned, normals, target, weights, gates, params.affine), aligned)
+    starts = starts_from(aligned[landmarks[0]], landmarks[1], params.affine.max_stretch)
+    return apply_affine(fit_affine(aligned, normals, target, weights, gates, params.affine, starts), aligned)
 
 
 def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
