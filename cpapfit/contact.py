@@ -5,8 +5,8 @@ stored as barycentric points on template triangles. Through the registration (sa
 warped vertices) they land on the patient's face; each is then moved along the skin normal onto
 the scan itself where the scan has data within PROJECT_MM along that normal (a point over a hole
 stays: the seal must not be dragged to the hole's rim), so the cushion touches the real face
-rather than the template's approximation of it. For a point cloud, "along the normal" is its
-closest point at most TANGENT_MM sideways. "Onto the scan" means onto the skin the scan measures: a
+rather than the template's approximation of it. For a point cloud, "along the normal" means
+within TANGENT_MM of the normal line. "Onto the scan" means onto the skin the scan measures: a
 quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
 width SKIN_WIDTH_MM, widened to take in SKIN_NEIGHBOURS points where the scan is coarse), so that
 the seal follows the face and not the sensor's noise or depth steps (a local moving-least-squares
@@ -153,12 +153,20 @@ def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh) -
 
 
 def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 3) each point's closest cloud point, and (K,) whether it lies within PROJECT_MM and within
-    TANGENT_MM of the point's normal line (farther sideways it is a hole's rim)."""
-    dist, idx = cKDTree(cloud).query(points)
-    offset = cloud[idx] - points
-    sideways = np.linalg.norm(offset - np.einsum("ij,ij->i", offset, normals)[:, None] * normals, axis=1)
-    return cloud[idx], (dist <= PROJECT_MM) & (sideways <= TANGENT_MM)
+    """(K, 3) where each point's normal line passes the cloud: level with the cloud point nearest the
+    point along the line among those within TANGENT_MM of it and PROJECT_MM of the point (a ray cast
+    at a cloud; `local_skin` then puts it on the skin there), and (K,) whether there is one (where
+    not, the point itself)."""
+    hit, near = points.copy(), np.zeros(len(points), dtype=bool)
+    for k, around in enumerate(cKDTree(cloud).query_ball_point(points, PROJECT_MM)):
+        offset = cloud[np.sort(np.asarray(around, dtype=np.int64))] - points[k]
+        along = offset @ normals[k]
+        sideways = np.linalg.norm(offset - along[:, None] * normals[k], axis=1)
+        on_line = np.flatnonzero(sideways <= TANGENT_MM)
+        if len(on_line):
+            nearest = on_line[np.argmin(np.abs(along[on_line]))]
+            hit[k], near[k] = points[k] + along[nearest] * normals[k], True
+    return hit, near
 
 
 def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -154,19 +154,23 @@ def grid_faces(n: int) -> np.ndarray:
     return np.concatenate([np.column_stack([corner, corner + 1, corner + n]), np.column_stack([corner + 1, corner + n + 1, corner + n])])
 
 
-def test_seal_points_over_a_hole_are_not_dragged_to_its_rim():
+@pytest.mark.parametrize("cloud", [False, True], ids=["mesh", "point cloud"])
+def test_seal_points_over_a_hole_are_not_dragged_to_its_rim(cloud):
     """A flat scan (z = 0, 1 mm grid) with a hole of radius 6 mm; seal points 0.5 mm above it:
-    those over data drop onto the scan, those over the hole stay (their closest point is its rim)."""
+    those over data drop onto the scan, those over the hole stay (their closest point is its rim),
+    and so does one 15 mm above the scan (no scan within reach)."""
     n = 31
     xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
     faces = grid_faces(n)
-    vertices = np.column_stack([xy, np.zeros(len(xy))])
     faces = faces[(np.linalg.norm(xy[faces], axis=2) > 6.0).all(axis=1)]
+    kept = np.unique(faces) if cloud else np.arange(len(xy))
+    vertices = np.column_stack([xy[kept], np.zeros(len(kept))])
+    faces = np.zeros((0, 3), dtype=np.int64) if cloud else faces
     scan = Scan(vertices, faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
-    points = np.array([[0.0, 0.0, 0.5], [4.5, 0.0, 0.5], [10.0, 0.0, 0.5], [-10.0, 3.0, 0.5]])
-    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (4, 1)), scan_surface(scan))
-    assert on_scan.tolist() == [False, False, True, True]
-    assert np.allclose(moved[:2], points[:2]) and np.allclose(moved[2:], points[2:] - [0, 0, 0.5], atol=1e-9)
+    points = np.array([[0.0, 0.0, 0.5], [4.5, 0.0, 0.5], [0.0, 10.0, 15.0], [10.0, 0.0, 0.5], [-10.0, 3.0, 0.5]])
+    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (5, 1)), scan_surface(scan))
+    assert on_scan.tolist() == [False, False, False, True, True]
+    assert np.allclose(moved[:3], points[:3]) and np.allclose(moved[3:], points[3:] - [0, 0, 0.5], atol=1e-9)
 
 
 def seal_on_sphere(seed: int, step: float, sigma: float, depth_step: float | None, ring: tuple[float, float]):
@@ -215,12 +219,14 @@ def test_a_cheap_camera_far_away_still_gives_a_cushion_on_the_skin(tmp_path):
     assert np.median(gap) <= 0.5 and gap.max() <= 2.0
 
 
-def test_seal_points_reach_a_scan_tilted_against_the_template():
+@pytest.mark.parametrize("cloud", [False, True], ids=["mesh", "point cloud"])
+def test_seal_points_reach_a_scan_tilted_against_the_template(cloud):
     """Where the registered template is 3 mm off a scan tilted 40° against its normal, the seal
-    point lands on the scan straight along its normal (its closest point lies 1.9 mm sideways)."""
+    point lands on the scan straight along its normal (its closest point lies 1.9 mm sideways: a
+    point cloud's seal point took that for a hole's rim and stayed 3 mm off)."""
     n = 31
     xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
-    faces = grid_faces(n)
+    faces = np.zeros((0, 3), dtype=np.int64) if cloud else grid_faces(n)
     surface = scan_surface(Scan(np.column_stack([xy, np.zeros(len(xy))]), faces, np.tile([0.0, 0.0, 1.0], (len(xy), 1))))
     normal = np.array([[np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))]])
     moved, on_scan = onto_scan(np.array([[2.0, 1.0, 0.0]]) + 3.0 * normal, normal, surface)

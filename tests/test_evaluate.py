@@ -9,7 +9,7 @@ from cpapfit.errors import InputError
 from cpapfit.evaluate.fit import FitParams
 from cpapfit.evaluate.leak import leak_l_min
 from cpapfit.evaluate.mechanics import press
-from cpapfit.evaluate.rim import find_rim
+from cpapfit.evaluate.rim import find_rim, _skin_below
 from cpapfit.evaluate.tissue import stiffness
 from cpapfit.template import load_template
 
@@ -229,3 +229,14 @@ def test_compensation_evens_out_the_rim_pressure(designed):
     p = d.fits["custom"].pressure_kpa[d.fits["custom"].rim.covered]
     assert np.median(p) == pytest.approx(d.fit_params.target_kpa, abs=0.3)
     assert d.preload.mm.min() == 0.0 and d.preload.mm.max() > 0.5  # soft tissue gets more pre-load
+
+
+def test_a_point_cloud_edge_in_a_row_does_not_tilt_the_skin_away():
+    """Under a rim point beside a cloud's edge, the only points near the ray lie nearly in a row
+    (the edge, 1.5 mm away): the plane through them may tilt at random across the row, but the
+    skin's height is kept within theirs: 0.95-1.05 mm below the point (the plane's own: 1.27 mm)."""
+    rng = np.random.default_rng(0)
+    x = np.arange(-3.0, 3.01, 0.5)
+    row = np.column_stack([x, rng.normal(0.0, 0.01, len(x)), rng.uniform(-0.05, 0.05, len(x))])
+    clearance, _ = _skin_below(np.array([[0.0, 1.5, 1.0]]), trimesh.PointCloud(row), np.array([0.0, 0.0, 1.0]))
+    assert 0.95 <= clearance[0] <= 1.05

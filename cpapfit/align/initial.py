@@ -5,6 +5,7 @@ from typing import Iterator
 from ..scan import Scan
 from ..template import Template, central_face
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
+from ..landmarks.cloud import facing_surface
 from ..landmarks.fallback import fallback_alignment
 from ..landmarks.types import Landmarks
 from .check import FaceCheck, check_face, require_face
@@ -16,7 +17,8 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
 
     User landmarks override detection. Otherwise the first of these that lies on a face wins: the
     detection; without one (on a mesh: or if it fails the face check), a detection on a render
-    from in front of the face the landmark-free fallback finds (meshes), then the fallback itself.
+    from in front of the face the landmark-free fallback finds (meshes, and point clouds through a
+    surface over their points), then the fallback itself.
     If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
     if user is not None:
@@ -40,7 +42,12 @@ def _candidates(scan: Scan, template: Template) -> Iterator[Detection]:
         if not scan.is_mesh:  # a capture's own image is the best view there is
             return
     landmarks, fit = fallback_alignment(scan, template)
-    front = detect_from_front(scan, template, fit) if scan.is_mesh else None
+    front = None if scan.is_capture else detect_from_front(_renderable(scan, fit), template, fit)
     if front is not None:
         yield front
     yield Detection(landmarks, fit, len(landmarks.points))
+
+
+def _renderable(scan: Scan, pose: Similarity) -> Scan:
+    """A mesh to render: the scan itself, or a point cloud's points facing out of the face at `pose`."""
+    return facing_surface(scan, pose.rotation[:, 2]) if scan.is_point_cloud else scan

@@ -7,7 +7,7 @@ import trimesh
 from scipy.ndimage import median_filter
 from scipy.spatial import cKDTree
 
-from ..align.correspondences import boundary_vertices, grid_boundary
+from ..align.correspondences import scan_boundary
 from ..frozen import freeze_arrays
 from ..scan import Scan
 from .rim import skin_under
@@ -54,20 +54,22 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
     gaps between the points)."""
     tree = cKDTree(scan.vertices)
     plane = off_skin(scan, tree, rim, max(CLOUD_REACH_MM, SPACINGS * spacing(tree)))
-    if scan.is_point_cloud:
-        return RimGap(plane, np.ones(len(rim), dtype=bool))
     nearest = tree.query(rim, k=NEAREST)[1]
+    covered = ~_edge(scan)[nearest].any(axis=1)
+    if scan.is_point_cloud:
+        return RimGap(plane, covered)
     around = scan.normals[nearest]  # (K, NEAREST, 3)
     skin = (around * np.sign(np.einsum("knj,kj->kn", around, normals))[..., None]).sum(axis=1)
     skin /= np.maximum(np.linalg.norm(skin, axis=1, keepdims=True), 1e-12)
     gap = np.abs(skin_under(rim, surface, skin, NORMAL_REACH_MM))
-    return RimGap(np.where(gap <= NORMAL_REACH_MM, gap, plane), ~_edge(scan)[nearest].any(axis=1))
+    return RimGap(np.where(gap <= NORMAL_REACH_MM, gap, plane), covered)
 
 
 def _edge(scan: Scan) -> np.ndarray:
-    """(N,) bool: scan points on a rim or hole of its surface, or in no triangle (a stray point)."""
-    rims = grid_boundary(scan) if scan.is_capture else boundary_vertices(len(scan.vertices), scan.faces)
-    return rims | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
+    """(N,) bool: scan points on a rim or hole of its surface, or in no triangle (a stray point of a
+    surface; every point of a cloud is in none)."""
+    stray = np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0
+    return scan_boundary(scan) | (stray & ~scan.is_point_cloud)
 
 
 def spacing(tree: cKDTree, sample: int = 2000) -> float:

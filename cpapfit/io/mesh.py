@@ -4,18 +4,17 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..render import texels
 from ..scan import Scan
+from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
 from .surface import MIN_SHARED_EDGES, check_surface, edge_use
 from .units import MM_PER_UNIT, decide_units
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
 MIN_VERTICES = 100
-NORMAL_NEIGHBOURS = 16
 
 
 def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
@@ -25,7 +24,7 @@ def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     _check(path, vertices, faces)
     unit, note = decide_units(vertices, units)
     vertices = vertices * MM_PER_UNIT[unit]
-    normals = _mesh_normals(vertices, faces) if len(faces) else _cloud_normals(vertices)
+    normals = _mesh_normals(vertices, faces) if len(faces) else cloud_normals(vertices)
     return Scan(
         vertices=vertices, faces=faces, normals=normals, source=str(path), units=unit, units_note=note,
         colors=colors, texture=texture, uv=uv,
@@ -159,17 +158,6 @@ def _mesh_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(N, 3) area-weighted unit vertex normals following the file's winding."""
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     return np.array(mesh.vertex_normals, dtype=np.float64)
-
-
-def _cloud_normals(vertices: np.ndarray) -> np.ndarray:
-    """(N, 3) unit normals of a point cloud by local PCA, oriented away from the centroid."""
-    _, idx = cKDTree(vertices).query(vertices, k=NORMAL_NEIGHBOURS, workers=-1)
-    nbrs = vertices[idx] - vertices[idx].mean(axis=1, keepdims=True)
-    _, _, vt = np.linalg.svd(nbrs, full_matrices=False)
-    normals = vt[:, -1, :]
-    flip = np.einsum("ij,ij->i", normals, vertices - vertices.mean(axis=0)) < 0
-    normals[flip] *= -1
-    return normals
 
 
 def _appearance(geom, n: int):

@@ -64,8 +64,13 @@ def starts(scan: Scan, template: Template) -> list[Similarity]:
 
 def thinned(points: np.ndarray, cube_mm: float) -> np.ndarray:
     """The (N, 3) points (mm) thinned to the first of each cube_mm cube they fall in, in their order."""
+    return points[one_per_cube(points, cube_mm)]
+
+
+def one_per_cube(points: np.ndarray, cube_mm: float) -> np.ndarray:
+    """Indices (ascending) of the first of the (N, 3) points (mm) in each cube_mm cube they fall in."""
     _, first = np.unique(np.floor(points / cube_mm).astype(np.int64), axis=0, return_index=True)
-    return points[np.sort(first)]
+    return np.sort(first)
 
 
 def fallback_alignment(scan: Scan, template: Template) -> tuple[Landmarks, Similarity]:
