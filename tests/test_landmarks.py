@@ -16,11 +16,12 @@ from cpapfit.errors import InputError
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
+from cpapfit.landmarks.cloud import facing_surface
 from cpapfit.landmarks.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
 from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.phantom import KINECT_V1, make_phantom
-from cpapfit.scan import Intrinsics
+from cpapfit.scan import Intrinsics, Scan
 from cpapfit.template import central_face, load_template
 
 TEMPLATE = load_template()
@@ -90,6 +91,13 @@ def test_a_point_cloud_is_seen_from_in_front_for_landmarks(colour, tmp_path):
     lm, fit, check = initial_alignment(load_scan(tmp_path / "cloud.ply"), TEMPLATE)
     assert lm.path == "render" and "frontal render" in lm.note and check.is_face
     assert region_error(fit, ph.surface @ turn.T, ph.faces) <= 1.0
+
+
+def test_a_point_cloud_in_a_row_has_no_surface_to_render():
+    """Points all in a row facing the camera span no area: the cloud is handed back, not a crash."""
+    points = np.column_stack([np.linspace(0.0, 100.0, 200), np.zeros(200), np.zeros(200)])
+    cloud = Scan(points, np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (200, 1)))
+    assert facing_surface(cloud, np.array([0.0, 0.0, 1.0])) is cloud
 
 
 def test_untextured_mesh_aligns_through_the_fallback(rotated_stl):

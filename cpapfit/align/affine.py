@@ -25,6 +25,7 @@ from .correspondences import Target, match
 
 MIN_LANDMARKS = 12  # fewer could not fix the map's 12 unknowns against their own errors
 IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
+IDENTITY.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ def fit_affine(
 
     weights: (point-to-point, point-to-plane); gates: the pair rejection (max distance mm, max
     normal angle deg); starts: (3, 4) maps to refine, in order of preference (see switch_margin).
-    A start is returned as it is if too few pairs are found."""
+    A start with too few pairs in its first round is its own result."""
     best, paired = _refine(points, normals, target, weights, gates, params, starts[0])
     for start in starts[1:]:
         fit, more = _refine(points, normals, target, weights, gates, params, start)

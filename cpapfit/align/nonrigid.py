@@ -199,8 +199,8 @@ def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
 
 
 def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, landmarks: tuple, params: NonrigidParams) -> np.ndarray:
-    """(n, 3) the similarity-aligned template stretched by the affine start, begun at the similarity
-    and at the trusted (template indices, (k, 3) scan points) `landmarks`' own map (unchanged if
+    """(n, 3) the similarity-aligned template stretched by the affine start, begun at the trusted
+    (template indices, (k, 3) scan points) `landmarks`' own map and at the similarity (unchanged if
     params.affine is None)."""
     if params.affine is None:
         return aligned

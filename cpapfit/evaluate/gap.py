@@ -68,8 +68,9 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
 def _edge(scan: Scan) -> np.ndarray:
     """(N,) bool: scan points on a rim or hole of its surface, or in no triangle (a stray point of a
     surface; every point of a cloud is in none)."""
-    stray = np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0
-    return scan_boundary(scan) | (stray & ~scan.is_point_cloud)
+    if scan.is_point_cloud:
+        return scan_boundary(scan)
+    return scan_boundary(scan) | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
 
 
 def spacing(tree: cKDTree, sample: int = 2000) -> float:

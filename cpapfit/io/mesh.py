@@ -121,10 +121,11 @@ def _check_obj_tail(path: Path) -> None:
 
 
 def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
-    """A triangle soup (every triangle with its own corners, as some exporters write) with the
-    corners at one position joined into one vertex, its colour their mean (a texture is sampled at
-    each corner first); any other mesh unchanged. Returns (vertices, faces, (colors, texture, uv))."""
-    if not len(faces) or (edge_use(faces) == 2).mean() >= MIN_SHARED_EDGES:
+    """A triangle soup (every triangle with its own corners, as some exporters write) or a point
+    cloud with the corners or points at one position joined into one, its colour their mean (a
+    texture is sampled at each corner first); any other mesh unchanged. A cloud's repeated points
+    would hide its rims and its normals. Returns (vertices, faces, (colors, texture, uv))."""
+    if len(faces) and (edge_use(faces) == 2).mean() >= MIN_SHARED_EDGES:
         return vertices, faces, appearance
     colors, texture, uv = appearance
     rgb = colors / 255.0 if colors is not None else None

@@ -6,8 +6,10 @@ holes, or join the face to what lies behind it. The points keep their colours; t
 detection only, and every later stage reads the cloud itself.
 """
 
+from dataclasses import replace
+
 import numpy as np
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, QhullError
 
 from ..scan import Scan
 from .fallback import one_per_cube
@@ -20,16 +22,19 @@ THIN_MM = 0.7
 def facing_surface(cloud: Scan, axis: np.ndarray) -> Scan:
     """A mesh `Scan` over the (N, 3) mm points of a point cloud whose normals face unit `axis`
     (vertices: the cloud's, those not facing or thinned away left unused), for rendering from
-    along `axis`."""
+    along `axis`; the cloud itself (nothing to render, so no detection) if its facing points span
+    no area."""
     facing = np.flatnonzero(cloud.normals @ axis > FACING_COS)
     facing = facing[one_per_cube(cloud.vertices[facing], THIN_MM)]
     if len(facing) < 3:
         return cloud
     helper = np.eye(3)[np.argmin(np.abs(axis))]
     across = np.stack([np.cross(axis, helper), np.cross(axis, np.cross(axis, helper))])
-    flat = cloud.vertices[facing] @ across.T
-    triangles = facing[Delaunay(flat).simplices]
+    try:
+        triangles = facing[Delaunay(cloud.vertices[facing] @ across.T).simplices]
+    except QhullError:  # all in a row, or at one place
+        return cloud
     corners = cloud.vertices[triangles]
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     kept = triangles[longest <= EDGE_FACTOR * np.median(longest)]
-    return Scan(cloud.vertices, kept.astype(np.int64), cloud.normals, cloud.source, cloud.units, cloud.units_note, cloud.colors)
+    return replace(cloud, faces=kept.astype(np.int64))
