@@ -27,7 +27,8 @@ from scipy.spatial import cKDTree
 from .align.nonrigid import NonrigidParams, Registration
 from .contact import Contact
 from .errors import QualityError
-from .evaluate.gap import SPACINGS, RimGap, off_skin, spacing
+from .evaluate.gap import SPACINGS, RimGap, off_skin
+from .evaluate.rim import spacing
 from .landmarks.types import Landmarks
 from .scan import Scan
 from .template import load_template

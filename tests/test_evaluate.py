@@ -240,3 +240,14 @@ def test_a_point_cloud_edge_in_a_row_does_not_tilt_the_skin_away():
     row = np.column_stack([x, rng.normal(0.0, 0.01, len(x)), rng.uniform(-0.05, 0.05, len(x))])
     clearance, _ = _skin_below(np.array([[0.0, 1.5, 1.0]]), trimesh.PointCloud(row), np.array([0.0, 0.0, 1.0]))
     assert 0.95 <= clearance[0] <= 1.05
+
+
+def test_a_point_cloud_too_sparse_for_the_rim_is_refused_in_words():
+    """A cloud of points 4 mm apart under a cushion: no ray has points within 2 mm, and the refusal
+    says the cloud is too sparse, how far apart its points are, and what to export instead."""
+    grid = np.stack(np.meshgrid(np.arange(-60, 61, 4.0), np.arange(-60, 61, 4.0)), -1).reshape(-1, 2)
+    flat = np.column_stack([grid, np.zeros(len(grid))])
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 10).apply_translation((2.0, 2.0, 30))
+    axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    with pytest.raises(InputError, match="4.0 mm apart, too sparse .* export a denser cloud, or a mesh"):
+        find_rim(ring, trimesh.PointCloud(flat), trimesh.Trimesh(flat, Delaunay(grid).simplices), axis, up)

@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 from ..align.correspondences import scan_boundary
 from ..frozen import freeze_arrays
 from ..scan import Scan
-from .rim import skin_under
+from .rim import skin_under, spacing
 
 SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
 CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point is measured to its tangent plane
@@ -71,12 +71,6 @@ def _edge(scan: Scan) -> np.ndarray:
     if scan.is_point_cloud:
         return scan_boundary(scan)
     return scan_boundary(scan) | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
-
-
-def spacing(tree: cKDTree, sample: int = 2000) -> float:
-    """Median distance (mm) from a scan point to its nearest neighbour (a deterministic sample)."""
-    points = tree.data[:: max(1, len(tree.data) // sample)]
-    return float(np.median(tree.query(points, k=2)[0][:, 1]))
 
 
 def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:

@@ -90,9 +90,25 @@ def find_rim(
     covered = np.isfinite(clearance).mean()
     if covered < MIN_COVERED:
         raise InputError(f"only {100 * covered:.0f} % of the cushion's rim lies over scanned skin "
-                         f"(at least {100 * MIN_COVERED:.0f} % needed): is the cushion in this scan's frame, in mm?")
+                         f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
+
+
+def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:
+    """The likely reason a rim finds no skin under it, in words."""
+    if isinstance(scan, trimesh.PointCloud):
+        apart = spacing(cKDTree(np.asarray(scan.vertices)))
+        if apart > CLOUD_RADIUS_MM:
+            return (f"the point cloud's points lie {apart:.1f} mm apart, too sparse to find the skin under the rim "
+                    f"(it needs points within {CLOUD_RADIUS_MM:g} mm of it): export a denser cloud, or a mesh")
+    return "is the cushion in this scan's frame, in mm?"
+
+
+def spacing(tree: cKDTree, sample: int = 2000) -> float:
+    """Median distance (mm) from a scan point to its nearest neighbour (a deterministic sample)."""
+    points = tree.data[:: max(1, len(tree.data) // sample)]
+    return float(np.median(tree.query(points, k=2)[0][:, 1]))
 
 
 def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray, reach: float = REACH_MM):
