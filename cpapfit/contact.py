@@ -106,7 +106,7 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
     """The (K, 3) points moved along their (K, 3) unit normals onto the skin the scan measures
     (`scan_surface`), and (K,) which moved: those with scan data within PROJECT_MM along the normal."""
     if isinstance(surface, trimesh.PointCloud):
-        hit, near = _closest_along(points, normals, surface.vertices)
+        hit, near = _closest_along(points, normals, surface.kdtree)
         sample = surface.vertices
     else:
         hit, near = _hit_along(points, normals, surface)
@@ -152,14 +152,14 @@ def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh) -
     return hit, near
 
 
-def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: cKDTree) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) where each point's normal line passes the cloud: level with the cloud point nearest the
     point along the line among those within TANGENT_MM of it and PROJECT_MM of the point (a ray cast
     at a cloud; `local_skin` then puts it on the skin there), and (K,) whether there is one (where
-    not, the point itself)."""
+    not, the point itself). `cloud`: the cloud's k-d tree (the surface's own, built once)."""
     hit, near = points.copy(), np.zeros(len(points), dtype=bool)
-    for k, around in enumerate(cKDTree(cloud).query_ball_point(points, PROJECT_MM)):
-        offset = cloud[np.sort(np.asarray(around, dtype=np.int64))] - points[k]
+    for k, around in enumerate(cloud.query_ball_point(points, PROJECT_MM)):  # each list ascending
+        offset = cloud.data[np.asarray(around, dtype=np.int64)] - points[k]
         along = offset @ normals[k]
         sideways = np.linalg.norm(offset - along[:, None] * normals[k], axis=1)
         on_line = np.flatnonzero(sideways <= TANGENT_MM)

@@ -68,9 +68,8 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
 def _edge(scan: Scan) -> np.ndarray:
     """(N,) bool: scan points on a rim or hole of its surface, or in no triangle (a stray point of a
     surface; every point of a cloud is in none)."""
-    if scan.is_point_cloud:
-        return scan_boundary(scan)
-    return scan_boundary(scan) | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
+    rims = scan_boundary(scan)
+    return rims if scan.is_point_cloud else rims | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
 
 
 def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:
