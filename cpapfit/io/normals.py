@@ -15,14 +15,21 @@ from scipy.spatial import cKDTree
 
 NEIGHBOURS = 16  # for the PCA
 GRAPH_NEIGHBOURS = 8  # edges of the graph the signs travel along (16: the same signs, twice the time)
+CHUNK = 100_000  # points per PCA batch: bounds the (chunk, NEIGHBOURS, 3) arrays (~40 MB each)
 
 
 def cloud_normals(vertices: np.ndarray) -> np.ndarray:
     """(N, 3) unit normals of (N, 3) points (mm) by local PCA over NEIGHBOURS, oriented consistently."""
     _, idx = cKDTree(vertices).query(vertices, k=NEIGHBOURS, workers=-1)
-    nbrs = vertices[idx] - vertices[idx].mean(axis=1, keepdims=True)
-    normals = np.linalg.svd(nbrs, full_matrices=False)[2][:, -1, :]
+    normals = np.concatenate([_least_spread(vertices[idx[i:i + CHUNK]]) for i in range(0, len(vertices), CHUNK)])
     return normals * _signs(vertices, normals, idx[:, : GRAPH_NEIGHBOURS + 1])[:, None]
+
+
+def _least_spread(neighbourhoods: np.ndarray) -> np.ndarray:
+    """(M, 3) unit direction of least spread of each of (M, k, 3) point sets (the covariance's
+    eigenvector of the smallest eigenvalue)."""
+    centred = neighbourhoods - neighbourhoods.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(np.einsum("mki,mkj->mij", centred, centred))[1][:, :, 0]
 
 
 def _signs(vertices: np.ndarray, normals: np.ndarray, idx: np.ndarray) -> np.ndarray:
