@@ -1,11 +1,13 @@
 """The `Scan` type every stage reads: a face surface in millimetres, with what the sensor gave."""
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import trimesh
 
 from .frozen import freeze_arrays
+from .rims import boundary_vertices, cloud_boundary, grid_boundary
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,19 @@ class Scan:
     def is_mesh(self) -> bool:
         """True for a triangle mesh not from a depth image (seen by rendering it)."""
         return not self.is_capture and not self.is_point_cloud
+
+    @cached_property
+    def rims(self) -> np.ndarray:
+        """(N,) bool, read-only: the points on the scan's edge and the edges of its holes (rims.py),
+        found once per scan (a large cloud's take seconds)."""
+        if self.is_capture:
+            out = grid_boundary(len(self.vertices), self.faces)
+        elif self.is_point_cloud:
+            out = cloud_boundary(self.vertices, self.normals)
+        else:
+            out = boundary_vertices(len(self.vertices), self.faces)
+        out.flags.writeable = False
+        return out
 
 
 def scan_surface(scan: Scan) -> trimesh.Trimesh | trimesh.PointCloud:

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.align.correspondences import boundary_vertices, cloud_boundary, subdivided
+from cpapfit.align.correspondences import subdivided
+from cpapfit.rims import boundary_vertices, cloud_boundary
 from cpapfit.io import load_scan
 from cpapfit.metrics import mask_region
 from cpapfit.pipeline import align, register_template

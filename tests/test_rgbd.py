@@ -33,7 +33,7 @@ def test_step_in_depth_is_not_triangulated_but_slopes_are():
 
 
 def test_grid_boundary_equals_the_edge_definition():
-    from cpapfit.align.correspondences import boundary_vertices, grid_boundary
+    from cpapfit.rims import boundary_vertices
     from cpapfit.scan import Scan
 
     rng = np.random.default_rng(1)
@@ -44,5 +44,5 @@ def test_grid_boundary_equals_the_edge_definition():
     pts = backproject(depth, K)[valid]
     scan = Scan(vertices=pts, faces=faces, normals=np.zeros_like(pts), depth=depth, valid=valid, pixel_vertex=pixel_vertex, intrinsics=K)
     used = np.bincount(faces.ravel(), minlength=len(pts)) > 0
-    assert np.array_equal(grid_boundary(scan)[used], boundary_vertices(len(pts), faces)[used])
-    assert grid_boundary(scan)[~used].all()  # a pixel with no triangle is no place to match
+    assert np.array_equal(scan.rims[used], boundary_vertices(len(pts), faces)[used])
+    assert scan.rims[~used].all()  # a pixel with no triangle is no place to match

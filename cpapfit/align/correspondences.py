@@ -1,12 +1,8 @@
 """Correspondences of template vertices on a scan: k-d tree, or projection onto the depth grid.
 
 Pairs are rejected when farther apart than max_distance_mm, when their normals differ by more
-than max_normal_deg, or when the scan point lies on the scan's boundary (its rim and the rims
-of its holes), where the nearest point is not a true correspondence. A point cloud's boundary
-is where a point's nearest neighbours, seen in its tangent plane, leave a gap wider than
-EDGE_GAP_DEG around it (the angle criterion of PCL's BoundaryEstimation). PCL's 90 degrees over 16
-neighbours flags 26 % of the inside of a randomly sampled surface; 120 over 24 flags 0.3 %, and
-98 % of the points within half a spacing of its edge.
+than max_normal_deg, or when the scan point lies on the scan's rims (`Scan.rims`: its edge and
+the edges of its holes), where the nearest point is not a true correspondence.
 """
 
 from dataclasses import dataclass
@@ -16,10 +12,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..scan import Scan
-
-
-EDGE_NEIGHBOURS = 24
-EDGE_GAP_DEG = 120.0
+from ..rims import boundary_vertices
 
 
 @dataclass(frozen=True)
@@ -42,28 +35,15 @@ class Matches:
     valid: np.ndarray
 
 
-def boundary_vertices(n_vertices: int, faces: np.ndarray) -> np.ndarray:
-    """(N,) bool: vertices on an edge used by one triangle only (rims of the surface and its holes)."""
-    out = np.zeros(n_vertices, dtype=bool)
-    if len(faces) == 0:
-        return out
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    keys, counts = np.unique(edges[:, 0] * n_vertices + edges[:, 1], return_counts=True)
-    lonely = keys[counts == 1]
-    out[lonely // n_vertices] = True
-    out[lonely % n_vertices] = True
-    return out
-
-
 def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
     """The lookup structure for a scan. A mesh scan twice as coarse as `spacing_mm` is subdivided
     first (see `subdivided`), so that its nearest vertex is near its nearest surface point."""
-    vertices, faces, normals = scan.vertices, scan.faces, scan.normals
+    vertices, faces, normals, boundary = scan.vertices, scan.faces, scan.normals, scan.rims
     if not scan.is_capture and len(faces) and _median_edge(vertices, faces) > 2.0 * spacing_mm:
         vertices, faces = subdivided(vertices, faces, 1.5 * spacing_mm)
         normals = _subdivided_normals(scan, vertices, faces)
+        boundary = boundary_vertices(len(vertices), faces)
     tree = None if use_grid else cKDTree(vertices, balanced_tree=False, compact_nodes=False)  # the quicker queries
-    boundary = scan_boundary(scan) if scan.is_capture or scan.is_point_cloud else boundary_vertices(len(vertices), faces)
     return Target(vertices, normals, boundary, tree, scan if use_grid else None)
 
 
@@ -73,45 +53,6 @@ def subdivided(vertices: np.ndarray, faces: np.ndarray, edge_mm: float) -> tuple
     for _ in range(int(np.ceil(np.log2(_median_edge(vertices, faces) / edge_mm)))):
         vertices, faces = trimesh.remesh.subdivide(vertices, faces)
     return vertices, faces
-
-
-def scan_boundary(scan: Scan) -> np.ndarray:
-    """(N,) bool: the scan's points on its rims and the rims of its holes (a capture's, a mesh's or
-    a point cloud's)."""
-    if scan.is_capture:
-        return grid_boundary(scan)
-    if scan.is_point_cloud:
-        return cloud_boundary(scan.vertices, scan.normals)
-    return boundary_vertices(len(scan.vertices), scan.faces)
-
-
-def cloud_boundary(points: np.ndarray, normals: np.ndarray, chunk: int = 100_000) -> np.ndarray:
-    """(N,) bool: points of an (N, 3) cloud with unit normals whose EDGE_NEIGHBOURS nearest
-    neighbours, seen in the point's tangent plane, leave a gap wider than EDGE_GAP_DEG around it
-    (`chunk` points at a time)."""
-    tree = cKDTree(points)
-    k = min(EDGE_NEIGHBOURS, len(points))
-    return np.concatenate([_wide_gap(points, normals, tree, np.arange(i, min(i + chunk, len(points))), k)
-                           for i in range(0, len(points), chunk)])
-
-
-def _wide_gap(points: np.ndarray, normals: np.ndarray, tree: cKDTree, at: np.ndarray, k: int) -> np.ndarray:
-    idx = tree.query(points[at], k=k, workers=-1)[1]
-    offsets = points[idx[:, 1:]] - points[at, None, :]
-    n = normals[at]
-    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(n, u)
-    angles = np.sort(np.arctan2(np.einsum("nkj,nj->nk", offsets, v), np.einsum("nkj,nj->nk", offsets, u)), axis=1)
-    gaps = np.diff(angles, axis=1, append=angles[:, :1] + 2 * np.pi)
-    return gaps.max(axis=1) > np.radians(EDGE_GAP_DEG)
-
-
-def grid_boundary(scan: Scan) -> np.ndarray:
-    """(N,) bool rims of a triangulated depth image: with two triangles per pixel block, a vertex
-    inside the surface is used by exactly six triangles, one on a rim or hole by fewer."""
-    return np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) < 6
 
 
 def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:

@@ -7,7 +7,6 @@ import trimesh
 from scipy.ndimage import median_filter
 from scipy.spatial import cKDTree
 
-from ..align.correspondences import scan_boundary
 from ..frozen import freeze_arrays
 from ..scan import Scan
 from .rim import skin_under, spacing
@@ -68,8 +67,7 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
 def _edge(scan: Scan) -> np.ndarray:
     """(N,) bool: scan points on a rim or hole of its surface, or in no triangle (a stray point of a
     surface; every point of a cloud is in none)."""
-    rims = scan_boundary(scan)
-    return rims if scan.is_point_cloud else rims | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
+    return scan.rims if scan.is_point_cloud else scan.rims | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
 
 
 def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:

@@ -1,0 +1,57 @@
+"""Rims of a scan: the points on its edge and on the edges of its holes.
+
+A mesh's rims are the vertices of edges used by one triangle only. A depth image's are the pixels
+in fewer than the six triangles of an inside pixel. A point cloud's are where a point's nearest
+neighbours, seen in its tangent plane, leave a gap wider than EDGE_GAP_DEG around it (the angle
+criterion of PCL's BoundaryEstimation). PCL's 90 degrees over 16 neighbours flags 26 % of the
+inside of a randomly sampled surface; 120 over 24 flags 0.3 %, and 98 % of the points within half
+a spacing of its edge.
+"""
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+EDGE_NEIGHBOURS = 24
+EDGE_GAP_DEG = 120.0
+
+
+def boundary_vertices(n_vertices: int, faces: np.ndarray) -> np.ndarray:
+    """(N,) bool: vertices on an edge used by one triangle only (rims of the surface and its holes)."""
+    out = np.zeros(n_vertices, dtype=bool)
+    if len(faces) == 0:
+        return out
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    keys, counts = np.unique(edges[:, 0] * n_vertices + edges[:, 1], return_counts=True)
+    lonely = keys[counts == 1]
+    out[lonely // n_vertices] = True
+    out[lonely % n_vertices] = True
+    return out
+
+
+def grid_boundary(n_vertices: int, faces: np.ndarray) -> np.ndarray:
+    """(N,) bool rims of a triangulated depth image: with two triangles per pixel block, a vertex
+    inside the surface is used by exactly six triangles, one on a rim or hole by fewer."""
+    return np.bincount(faces.ravel(), minlength=n_vertices) < 6
+
+
+def cloud_boundary(points: np.ndarray, normals: np.ndarray, chunk: int = 100_000) -> np.ndarray:
+    """(N,) bool: points of an (N, 3) cloud with unit normals whose EDGE_NEIGHBOURS nearest
+    neighbours, seen in the point's tangent plane, leave a gap wider than EDGE_GAP_DEG around it
+    (`chunk` points at a time)."""
+    tree = cKDTree(points)
+    k = min(EDGE_NEIGHBOURS, len(points))
+    return np.concatenate([_wide_gap(points, normals, tree, np.arange(i, min(i + chunk, len(points))), k)
+                           for i in range(0, len(points), chunk)])
+
+
+def _wide_gap(points: np.ndarray, normals: np.ndarray, tree: cKDTree, at: np.ndarray, k: int) -> np.ndarray:
+    idx = tree.query(points[at], k=k, workers=-1)[1]
+    offsets = points[idx[:, 1:]] - points[at, None, :]
+    n = normals[at]
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(n, u)
+    angles = np.sort(np.arctan2(np.einsum("nkj,nj->nk", offsets, v), np.einsum("nkj,nj->nk", offsets, u)), axis=1)
+    gaps = np.diff(angles, axis=1, append=angles[:, :1] + 2 * np.pi)
+    return gaps.max(axis=1) > np.radians(EDGE_GAP_DEG)
