@@ -51,6 +51,23 @@ KINECT_V1 = SensorModel(noise_mm_at_500=0.4, baseline_mm=75.0, disparity_step_px
 
 
 @dataclass(frozen=True)
+class PoseRange:
+    """How the head is posed: yaw, pitch and roll drawn within +- these (degrees), and the face put
+    off the image centre by this fraction of the room the image leaves (0: centred, 1: anywhere in view)."""
+
+    yaw_deg: float = 25.0
+    pitch_deg: float = 25.0
+    roll_deg: float = 15.0
+    off_centre: float = 1.0
+
+
+ANY_POSE = PoseRange()
+"""The default: any pose a depth camera can still see the face in (a hard case mix)."""
+FRAMED = PoseRange(10.0, 10.0, 6.0, 0.3)
+"""A capture an operator framed: the patient facing the camera, the face near the middle of the frame."""
+
+
+@dataclass(frozen=True)
 class Phantom:
     """A synthetic RGB-D capture and its truth.
 
@@ -79,21 +96,22 @@ class Phantom:
 
 
 def make_phantom(
-    seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None
+    seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None,
+    pose: PoseRange = ANY_POSE,
 ) -> Phantom:
     """The synthetic subject of `seed`: same seed, same arrays, bit for bit. `yaw_deg` turns the
-    head by that yaw, `distance_mm` sets it that far from the camera, instead of the random ones
-    (everything else as for the seed)."""
+    head by that yaw, `distance_mm` sets it that far from the camera, instead of the random ones;
+    `pose` bounds the random pose (everything else as for the seed: the same face whatever the pose)."""
     rng = np.random.default_rng(seed)
     template = load_template()
     identity = random_identity(rng)
     face = apply_identity(template, identity)
     intrinsics = random_intrinsics(rng)
-    surface, pose = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm)
+    surface, placed = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm, pose)
     hits = raycast(surface, template.faces, intrinsics)
     image = colour_image(hits, surface, template, rng)
     depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
-    return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, pose)
+    return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, placed)
 
 
 def random_identity(rng: np.random.Generator) -> dict:
@@ -142,13 +160,13 @@ def random_intrinsics(rng: np.random.Generator) -> Intrinsics:
 
 def place_in_view(
     face: np.ndarray, template: Template, intr: Intrinsics, rng: np.random.Generator,
-    yaw_deg: float | None = None, distance_mm: float | None = None,
+    yaw_deg: float | None = None, distance_mm: float | None = None, pose: PoseRange = ANY_POSE,
 ):
-    """Pose the face (yaw/pitch +-25 deg, roll +-15 deg; yaw `yaw_deg` if given) at 350-700 mm
-    (`distance_mm` if given), wholly inside the image.
+    """Pose the face within `pose` (yaw `yaw_deg` if given) at 350-700 mm (`distance_mm` if given),
+    wholly inside the image.
 
     Returns (surface (N, 3) mm camera frame, pose dict)."""
-    yaw, pitch, roll = rng.uniform(-25, 25), rng.uniform(-25, 25), rng.uniform(-15, 15)
+    yaw, pitch, roll = (rng.uniform(-r, r) for r in (pose.yaw_deg, pose.pitch_deg, pose.roll_deg))
     yaw = yaw if yaw_deg is None else yaw_deg  # drawn all the same: the rest of the subject is the seed's
     head = Rotation.from_euler("yxz", [yaw, pitch, roll], degrees=True).as_matrix()
     rotation = TEMPLATE_TO_CAMERA @ head
@@ -160,13 +178,14 @@ def place_in_view(
     margin = 8.0
     lo = -np.array([intr.cx, intr.cy]) + margin - uv.min(axis=0)
     hi = np.array([intr.width - 1 - intr.cx, intr.height - 1 - intr.cy]) - margin - uv.max(axis=0)
-    shift_px = rng.uniform(np.minimum(lo, hi), np.maximum(lo, hi)) if (hi >= lo).all() else np.zeros(2)
+    a, b = np.minimum(lo, hi), np.maximum(lo, hi)
+    shift_px = np.clip(pose.off_centre * rng.uniform(a, b), a, b) if (hi >= lo).all() else np.zeros(2)
     translation = np.array([*(shift_px * distance / np.array([intr.fx, intr.fy])), distance])
-    pose = {
+    placed = {
         "yaw_deg": float(yaw), "pitch_deg": float(pitch), "roll_deg": float(roll), "distance_mm": distance,
         "rotation": rotation.tolist(), "translation_mm": translation.tolist(), "template_centre_mm": centre.tolist(),
     }
-    return local + translation, pose
+    return local + translation, placed
 
 
 def skin_albedo(template: Template, rng: np.random.Generator) -> np.ndarray:

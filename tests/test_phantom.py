@@ -8,7 +8,7 @@ import trimesh
 
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import phantom_files
-from cpapfit.phantom import SensorModel, make_phantom
+from cpapfit.phantom import FRAMED, SensorModel, make_phantom
 from cpapfit.template import load_template
 
 
@@ -75,6 +75,24 @@ def test_pose_and_distance_in_range():
         pose = make_phantom(seed).pose
         assert 350 <= pose["distance_mm"] <= 700
         assert abs(pose["yaw_deg"]) <= 25 and abs(pose["pitch_deg"]) <= 25 and abs(pose["roll_deg"]) <= 15
+
+
+def test_a_framed_pose_is_the_same_face_turned_less_and_nearer_the_centre():
+    """`FRAMED` bounds the pose (yaw/pitch 10 deg, roll 6 deg, 0.3 of the room off centre); the face,
+    the camera and the distance are the seed's."""
+    from cpapfit.rgbd import project
+
+    for seed in range(4):
+        wide, framed = make_phantom(seed), make_phantom(seed, pose=FRAMED)
+        assert framed.identity == wide.identity and framed.intrinsics == wide.intrinsics
+        p, q = wide.pose, framed.pose
+        assert q["distance_mm"] == p["distance_mm"]
+        for angle, bound in (("yaw_deg", 10), ("pitch_deg", 10), ("roll_deg", 6)):
+            assert abs(q[angle]) <= bound and q[angle] == pytest.approx(p[angle] * bound / (25 if bound == 10 else 15))
+        uv = project(framed.surface, framed.intrinsics)
+        assert (uv >= 0).all() and (uv[:, 0] <= 639).all() and (uv[:, 1] <= 479).all()
+        centre = np.array([framed.intrinsics.cx, framed.intrinsics.cy])
+        assert np.linalg.norm(uv.mean(0) - centre) <= np.linalg.norm(project(wide.surface, wide.intrinsics).mean(0) - centre) + 1.0
 
 
 def test_face_is_wholly_in_view(phantom1):
