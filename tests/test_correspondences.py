@@ -7,6 +7,7 @@ import trimesh
 
 from cpapfit.align.correspondences import subdivided
 from cpapfit.rims import boundary_vertices, cloud_boundary
+from cpapfit.scan import Scan
 from cpapfit.io import load_scan
 from cpapfit.metrics import mask_region
 from cpapfit.pipeline import align, register_template
@@ -51,7 +52,8 @@ def test_fran_registers_onto_its_real_surface(shared_data):
 def test_a_point_clouds_rim_is_found_and_its_inside_is_not():
     """40 000 points scattered at random on a 100 mm square (0.5 mm apart): of those more than 5 mm
     inside, at most 0.5 % are taken for rim (PCL's 90 degrees over 16 neighbours: 26 %); of those
-    within a quarter spacing of the edge, at least 95 %. Counted in chunks or at once: the same."""
+    within a quarter spacing of the edge, at least 95 %. Counted in chunks or at once: the same; and
+    a `Scan` of those points finds them once and keeps them read-only."""
     rng = np.random.default_rng(0)
     points = np.column_stack([rng.uniform(0.0, 100.0, (40_000, 2)), np.zeros(40_000)])
     normals = np.tile([0.0, 0.0, 1.0], (len(points), 1))
@@ -60,3 +62,5 @@ def test_a_point_clouds_rim_is_found_and_its_inside_is_not():
     edge = (points[:, :2].min(axis=1) < 0.125) | (points[:, :2].max(axis=1) > 99.875)
     assert rim[inside].mean() <= 0.005 and rim[edge].mean() >= 0.95
     assert np.array_equal(rim, cloud_boundary(points, normals, chunk=7_000))
+    scan = Scan(vertices=points, faces=np.zeros((0, 3), dtype=np.int64), normals=normals)
+    assert np.array_equal(scan.rims, rim) and scan.rims is scan.rims and not scan.rims.flags.writeable
