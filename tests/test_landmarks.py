@@ -261,16 +261,18 @@ def test_window_median_and_percentiles_equal_numpys_to_the_bit():
         assert np.array_equal(e, g, equal_nan=True)
 
 
-def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1):
-    """Depth removed over a disc (r ~9 mm) 20 mm below the nose tip, where the face check first
-    probes the lip: it probes lower and still finds a face standing > 8 mm out above the lip."""
+@pytest.mark.parametrize("below_mm, radius_mm", [(20.0, 9.0), (25.0, 13.0)])
+def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1, below_mm, radius_mm):
+    """Depth removed over a disc below the nose tip, where the face check first probes the lip
+    (20-30 mm below; the second disc covers all of 12-38 mm, as holes over the upper lip did on the
+    robustness study): it probes lower and still finds a face standing > 8 mm out above the lip."""
     ph = phantom1
     up = np.array(ph.pose["rotation"])[:, 1]  # the head's up direction in the camera frame
-    probe = ph.surface[4] - 20.0 * up
+    probe = ph.surface[4] - below_mm * up
     k = ph.intrinsics
     u, v = k.fx * probe[0] / probe[2] + k.cx, k.fy * probe[1] / probe[2] + k.cy
     vv, uu = np.mgrid[: k.height, : k.width]
-    radius_px = 9.0 * k.fx / probe[2]
+    radius_px = radius_mm * k.fx / probe[2]
     depth = np.where((uu - u) ** 2 + (vv - v) ** 2 <= radius_px**2, 0, ph.depth_raw).astype(np.uint16)
     write_files(tmp_path, capture_files(ph.image, depth, ph.intrinsics, ph.sensor.depth_scale))
     _, _, check = initial_alignment(load_scan(tmp_path), TEMPLATE)

@@ -5,7 +5,7 @@ Measures of the template's central face, carried by the similarity onto the scan
   point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
 - nose: how far the scan rises at its nose tip (the middle of its top layer near the template's
   tip, not one noise spike) above the scan 18 mm to either side of it and
-  20 mm below it (farther out where a hole leaves no data there), along the face's forward
+  20 mm below it (farther out, to 40 mm, where a hole leaves no data there), along the face's forward
   direction (a face: 10-30 mm and 10-25 mm; a sphere, a wall: a few mm; the edge of a box: a
   ridge, but nothing below); each height is the upper quartile of the scan points within
   PROBE_MM across: the skin's top layer, not the noise's highest point (1.4 mm of depth noise
@@ -29,7 +29,7 @@ from .similarity import Similarity
 NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
 COVER_MM = 10.0
 RIDGE_OFFSETS_MM = (18.0, 22.0, 26.0)  # probed in turn on each side: the first with scan data counts
-BELOW_OFFSETS_MM = (20.0, 25.0, 30.0)  # probed in turn: the first with scan data counts
+BELOW_OFFSETS_MM = (20.0, 25.0, 30.0, 35.0, 40.0)  # probed in turn: the first with scan data counts (down to the lower lip)
 PEAK_SEARCH_MM = 15.0
 PEAK_LAYER_MM = 2.0  # the nose tip: the middle of the scan's top layer this thick
 PROBE_MM = 4.0
