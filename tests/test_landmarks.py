@@ -261,12 +261,9 @@ def test_window_median_and_percentiles_equal_numpys_to_the_bit():
         assert np.array_equal(e, g, equal_nan=True)
 
 
-@pytest.mark.parametrize("below_mm, radius_mm", [(20.0, 9.0), (25.0, 13.0)])
-def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1, below_mm, radius_mm):
-    """Depth removed over a disc below the nose tip, where the face check first probes the lip
-    (20-30 mm below; the second disc covers all of 12-38 mm, as holes over the upper lip did on the
-    robustness study): it probes lower and still finds a face standing > 8 mm out above the lip."""
-    ph = phantom1
+def _without_disc_below_nose(ph, folder, below_mm: float, radius_mm: float):
+    """The capture of `ph` written to `folder` with the depth removed over a disc (radius mm) centred
+    `below_mm` below the nose tip, read back as a scan."""
     up = np.array(ph.pose["rotation"])[:, 1]  # the head's up direction in the camera frame
     probe = ph.surface[4] - below_mm * up
     k = ph.intrinsics
@@ -274,9 +271,26 @@ def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1, below_
     vv, uu = np.mgrid[: k.height, : k.width]
     radius_px = radius_mm * k.fx / probe[2]
     depth = np.where((uu - u) ** 2 + (vv - v) ** 2 <= radius_px**2, 0, ph.depth_raw).astype(np.uint16)
-    write_files(tmp_path, capture_files(ph.image, depth, ph.intrinsics, ph.sensor.depth_scale))
-    _, _, check = initial_alignment(load_scan(tmp_path), TEMPLATE)
+    write_files(folder, capture_files(ph.image, depth, ph.intrinsics, ph.sensor.depth_scale))
+    return load_scan(folder)
+
+
+@pytest.mark.parametrize("below_mm, radius_mm", [(20.0, 9.0), (25.0, 13.0)])
+def test_a_hole_below_the_nose_does_not_hide_the_face(tmp_path, phantom1, below_mm, radius_mm):
+    """Depth removed over a disc below the nose tip, where the face check first probes the lip
+    (20-30 mm below; the second disc covers all of 12-38 mm, as holes over the upper lip did on the
+    robustness study): it probes lower and still finds a face standing > 8 mm out above the lip."""
+    _, _, check = initial_alignment(_without_disc_below_nose(phantom1, tmp_path, below_mm, radius_mm), TEMPLATE)
     assert check.is_face and check.below_mm >= 8.0
+
+
+def test_no_scan_below_the_nose_is_refused_in_words(tmp_path, phantom1):
+    """Depth removed 10-54 mm below the nose tip: nothing to compare the tip with. Refused, saying
+    so, not as a nose "0.0 mm above the lip"."""
+    scan = _without_disc_below_nose(phantom1, tmp_path, 32.0, 22.0)
+    with pytest.raises(InputError, match="no face found .*no scan 20-40 mm below it") as err:
+        initial_alignment(scan, TEMPLATE)
+    assert "above the lip" not in str(err.value)
 
 
 def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):

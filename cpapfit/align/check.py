@@ -47,7 +47,8 @@ SCALE_RANGE = (0.7, 1.4)
 class FaceCheck:
     """coverage: fraction of central template points with the scan within 10 mm; median_gap_mm over
     those; ridge_mm, below_mm: how far the scan's nose tip stands out above the scan beside it and
-    below it (a box's edge is a ridge but not a peak); scale: the template's size on the scan."""
+    below it (a box's edge is a ridge but not a peak; NaN where the scan has no data there, which
+    fails); scale: the template's size on the scan."""
 
     coverage: float
     median_gap_mm: float
@@ -64,10 +65,12 @@ class FaceCheck:
         )
 
     def describe(self) -> str:
+        sides = f"{self.ridge_mm:.1f} mm above its sides (at least {MIN_RIDGE_MM})" if np.isfinite(self.ridge_mm) else "no scan beside it"
+        below = (f"{self.below_mm:.1f} mm above the lip (at least {MIN_BELOW_MM})" if np.isfinite(self.below_mm)
+                 else f"no scan {BELOW_OFFSETS_MM[0]:g}-{BELOW_OFFSETS_MM[-1]:g} mm below it")
         return (
             f"{100 * self.coverage:.0f} % of the central face covered (needs {100 * MIN_COVERAGE:.0f} %), median gap "
-            f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {self.ridge_mm:.1f} mm above its sides "
-            f"(at least {MIN_RIDGE_MM}) and {self.below_mm:.1f} mm above the lip (at least {MIN_BELOW_MM}), "
+            f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {sides} and {below}, "
             f"template scaled x{self.scale:.2f} (an adult face: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g})"
         )
 
@@ -103,7 +106,7 @@ def nose_peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) 
 def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity) -> tuple[float, float]:
     """How far the scan's nose tip (the peak near the aligned template's) stands out (mm, along the face's forward direction)
     above the scan to either side (those sides with data) and below it, each at the first of its
-    offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data."""
+    offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data (NaN: none has any)."""
     lm = template.vertices
     forward, up = similarity.rotation[:, 2], similarity.rotation[:, 1]
     side = similarity.rotation @ (lm[LEFT_ALA] - lm[RIGHT_ALA])
@@ -122,7 +125,7 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
     sides = np.array([_first(height(tip + s * offset * side) for offset in RIDGE_OFFSETS_MM) for s in (-1.0, 1.0)])
     beside = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
     below = top - _first(height(tip - offset * up) for offset in BELOW_OFFSETS_MM)
-    return tuple(float(x) if np.isfinite(x) else 0.0 for x in (beside, below))
+    return float(beside), float(below)
 
 
 def _first(heights) -> float:
