@@ -1,5 +1,5 @@
 """Robustness study (issue 9): synthetic subjects under landmark noise, holes over the mask region,
-sensor noise, a cheap camera far away, head yaw and scale errors, each designed end to end (`pipeline.design`, nasal mask).
+sensor noise, a cheap camera far away, head yaw, scale errors and a colour image not registered to its depth, each designed end to end (`pipeline.design`, nasal mask).
 
 One factor at a time: every condition starts from a capture an operator framed (`phantom.FRAMED`:
 yaw and pitch within +-10 deg, roll +-6 deg, the face near the middle of the frame) and changes one
@@ -18,6 +18,7 @@ for the levels that are not moderate, default --seeds.)
 """
 
 import argparse
+import dataclasses
 import platform
 import tempfile
 import time
@@ -42,6 +43,11 @@ from cpapfit.template import load_template
 
 REGION = mask_region(load_template())
 
+def shifted_colour(ph, px: int):
+    """The subject with its colour image moved `px` pixels sideways: a capture not registered to its depth."""
+    return dataclasses.replace(ph, image=np.roll(ph.image, px, axis=1))
+
+
 # (condition, level, moderate, how the subject is made):
 # subject(seed) -> (phantom, depth_scale factor, landmark noise mm[, user file])
 CONDITIONS = [
@@ -58,6 +64,8 @@ CONDITIONS = [
     *[("yaw (deg)", f"{x:g}", x <= 20, lambda s, x=x: (make_phantom(s, yaw_deg=x, pose=FRAMED), 1.0, 0.0)) for x in (0.0, 20.0, 40.0)],
     *[("scale error (depth_scale misstated)", f"x{x:g}", True, lambda s, x=x: (make_phantom(s, pose=FRAMED), x, 0.0))
       for x in (0.9, 1.1)],
+    *[("colour image shifted sideways from its depth (px, ~mm)", f"{x}", False,
+       lambda s, x=x: (shifted_colour(make_phantom(s, pose=FRAMED), x), 1.0, 0.0)) for x in (8, 16)],
     ("any pose (yaw, pitch +-25 deg, roll +-15 deg, anywhere in view)", "-", False, lambda s: (make_phantom(s, pose=ANY_POSE), 1.0, 0.0)),
 ]
 
@@ -99,7 +107,7 @@ def run(seed: int, ph, scale: float, sigma: float, user: bool = False) -> dict:
         return {"outcome": "refused", "reason": f"{type(exc).__name__}: {str(exc).split(':')[0][:60]}", "message": str(exc)}
     err = float(np.linalg.norm(d.registration.vertices[REGION] - scale * ph.surface[REGION], axis=1).mean())
     flags = [g.code for g in d.quality.flags]
-    return {"outcome": "made", "err": err, "flags": flags}
+    return {"outcome": "made", "err": err, "flags": flags, "spread": round(d.registration.landmark_spread_mm, 2)}
 
 
 def one(job: tuple[int, int]) -> dict:

@@ -11,9 +11,13 @@ Measured once the template is registered and the seal carried over (all mm):
   lifted from the depth, so they lie on it; landmarks off it (another session's coordinates, a
   wrong frame, a careless file) drag the registration, and the mask, along the skin where
   nothing in the geometry can pull it back. Landmark-free alignments (fallback) are not judged.
-- landmark spread (a user's landmarks): their median distance to their places on the face
-  registered at the detected landmarks' weight (`Registration.landmark_spread_mm`): past the
-  registration's trust they were not given the paper's weight, and the file deserves a look.
+- landmark spread: the landmarks' median distance to their places on the face registered at the
+  detected landmarks' weight (`Registration.landmark_spread_mm`). A user's: past the registration's
+  trust they were not given the paper's weight, and the file deserves a look. Detected ones lie
+  2-5 mm from their places (the detector's own error); far more, and the image has drifted from
+  the geometry: a colour image not registered to its depth (a shift of 8 px, ~8 mm, gives 6-8 mm),
+  or a texture misplaced on its mesh. The registration holds such landmarks only partly, and the
+  seal slides along the skin with them.
 
 Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
 threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
@@ -46,6 +50,7 @@ class QualityParams:
     landmarks_*_mm: median distance of the landmarks from the scanned skin, mm (bad above).
     landmark_spread_*_mm: a user's landmarks' median distance along the face from their places on
         it, mm (bad above); flagged where the registration stops trusting them.
+    detected_spread_*_mm: the same for detected landmarks, mm (bad above).
     rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
         median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
         it by construction (<= 0.6 mm), unless the template missed the face there.
@@ -64,6 +69,8 @@ class QualityParams:
     landmarks_refuse_mm: float = 5.0
     landmark_spread_flag_mm: float = NonrigidParams().user_trust_mm
     landmark_spread_refuse_mm: float = 10.0
+    detected_spread_flag_mm: float = 6.0
+    detected_spread_refuse_mm: float = 10.0
     rim_gap_flag_mm: float = 1.0
     rim_gap_refuse_mm: float = 3.0
 
@@ -157,12 +164,23 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         gates.append(_gate("landmarks_mm", off, (p.landmarks_flag_mm, p.landmarks_refuse_mm),
                            f"the {landmarks.path} landmarks lie a median {off:.1f} mm off the scanned skin",
                            "they disagree with the geometry: check the landmarks file, or rescan"))
-    if landmarks.path == "user":
-        spread = registration.landmark_spread_mm
-        gates.append(_gate("landmark_spread_mm", spread, (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm),
-                           f"the landmarks file's points lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
-                           "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out"))
+        if np.isfinite(registration.landmark_spread_mm):
+            gates.append(_spread_gate(landmarks.path, registration.landmark_spread_mm, p))
     return Quality(tuple(gates))
+
+
+def _spread_gate(path: str, spread: float, p: QualityParams) -> Gate:
+    """The landmarks' median distance (mm) from their places on the face the geometry gives: a
+    user's file against its trust, detected landmarks against the detector's own error."""
+    if path == "user":
+        return _gate("landmark_spread_mm", spread, (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm),
+                     f"the landmarks file's points lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
+                     "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out")
+    cause = ("the colour image may not line up with the depth (register it to the depth image)" if path == "image"
+             else "the mesh's texture may be misplaced on it")
+    return _gate("landmark_spread_mm", spread, (p.detected_spread_flag_mm, p.detected_spread_refuse_mm),
+                 f"the landmarks detected on the {path} lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
+                 f"{cause}, or the image misled the detector: rescan, or give landmarks with --landmarks")
 
 
 def require_quality(quality: Quality) -> Quality:

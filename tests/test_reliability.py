@@ -2,6 +2,7 @@
 and no network (sockets blocked)."""
 
 import contextlib
+import dataclasses
 import io
 import json
 import multiprocessing
@@ -92,7 +93,7 @@ def test_a_clean_subject_trips_no_gate(twice):
     q = fit["quality"]
     assert q["coverage"] > GATES.coverage_flag and q["hole_mm"] < GATES.hole_flag_mm
     assert q["residual_mm"] < GATES.residual_flag_mm and q["landmarks_mm"] < GATES.landmarks_flag_mm
-    assert q["rim_gap_mm"] < GATES.rim_gap_flag_mm
+    assert q["rim_gap_mm"] < GATES.rim_gap_flag_mm and q["landmark_spread_mm"] < GATES.detected_spread_flag_mm
     assert "rescan advised" not in err
 
 
@@ -140,6 +141,17 @@ def test_landmarks_off_along_the_skin_are_flagged_and_not_trusted(tmp_path, phan
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
     assert fit["registration"]["landmark_weight_factor"] == pytest.approx(0.1)
     assert fit["quality"]["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
+
+
+def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
+    """Colour 12 px (~12 mm) to the side of the depth, a capture not registered: the detected
+    landmarks are lifted onto the wrong skin and drag the seal ~2 mm along it. Their spread from
+    the face the geometry gives (8.4 mm against 2.3 unshifted) flags it, saying why."""
+    shifted = dataclasses.replace(phantom1, image=np.roll(phantom1.image, 12, axis=1))
+    codes, err = design_flags(tmp_path, shifted)
+    assert "landmark_spread_mm" in codes and "colour image may not line up with the depth" in err, err
+    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert fit["quality"]["landmark_spread_mm"] > GATES.detected_spread_flag_mm
 
 
 def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):
