@@ -1,0 +1,47 @@
+"""The README's table of quality gates states the thresholds `QualityParams` holds."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from cpapfit.quality import QualityParams
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+# (gate code, words its row starts with) -> the QualityParams fields of its (flagged, refused) thresholds
+ROWS = {
+    ("coverage", ""): ("coverage_flag", "coverage_refuse"),
+    ("hole_mm", ""): ("hole_flag_mm", "hole_refuse_mm"),
+    ("residual_mm", ""): ("residual_flag_mm", "residual_refuse_mm"),
+    ("landmarks_mm", ""): ("landmarks_flag_mm", "landmarks_refuse_mm"),
+    ("landmark_spread_mm", "a landmarks file"): ("landmark_spread_flag_mm", "landmark_spread_refuse_mm"),
+    ("landmark_spread_mm", "detected landmarks"): ("detected_spread_flag_mm", "detected_spread_refuse_mm"),
+    ("rim_gap_mm", ""): ("rim_gap_flag_mm", "rim_gap_refuse_mm"),
+}
+
+
+def gate_rows() -> list[tuple[str, str, float, float]]:
+    """(code, measure, flagged at, refused at) of each row of the README's gate table (% as fractions)."""
+    rows = []
+    for line in README.read_text().splitlines():
+        m = re.match(r"\| `(\w+)` \| (.*) \| [<>] ([\d.]+) (%|mm) \| [<>] ([\d.]+) (%|mm) \|$", line)
+        if m:
+            scale = 0.01 if m.group(4) == "%" else 1.0
+            rows.append((m.group(1), m.group(2), float(m.group(3)) * scale, float(m.group(5)) * scale))
+    return rows
+
+
+def row_key(code: str, measure: str) -> tuple[str, str]:
+    """The ROWS key of a table row: its code and the words its measure starts with, if its code has several rows."""
+    return code, next((w for c, w in ROWS if c == code and w and measure.startswith(w)), "")
+
+
+def test_every_gate_has_one_row():
+    assert sorted(row_key(code, measure) for code, measure, *_ in gate_rows()) == sorted(ROWS)
+
+
+@pytest.mark.parametrize("code,measure,flag,refuse", gate_rows())
+def test_the_readme_states_the_thresholds_in_force(code, measure, flag, refuse):
+    flag_field, refuse_field = ROWS[row_key(code, measure)]
+    params = QualityParams()
+    assert (flag, refuse) == pytest.approx((getattr(params, flag_field), getattr(params, refuse_field)))
