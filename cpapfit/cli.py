@@ -24,7 +24,7 @@ from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import design_job, user_landmarks
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
-from .pipeline import Alignment, align, evaluate, face_for, missing_stages, register_template, stage_table
+from .pipeline import Alignment, align, evaluate, face_for, missing_stages, registered, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -80,7 +80,7 @@ def registration_summary(reg) -> str:
 
 def cmd_register(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
-    reg = register_template(scan, align(scan, load_user_landmarks(args, scan)))
+    _, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
     write_bytes(Path(args.out), registration_ply(reg))
     info(f"{scan.units_note}; {registration_summary(reg)} -> {args.out}")
     return 0
@@ -139,8 +139,7 @@ def cmd_evaluate(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
     cushion = load_cushion(Path(args.cushion))
     params = FitParams(cpap_cmh2o=args.cpap)
-    al = align(scan, load_user_landmarks(args, scan))
-    reg = register_template(scan, al)
+    al, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
     fits = evaluate(face_for(scan, al, reg), al, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}

@@ -8,7 +8,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from .align.check import FaceCheck
-from .align.initial import initial_alignment
+from .align.initial import initial_alignment, landmark_free_alignment
 from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
@@ -19,7 +19,7 @@ from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
-from .quality import Quality, assess, require_quality
+from .quality import Quality, QualityParams, assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .scan import Scan, scan_surface
@@ -31,6 +31,7 @@ STAGES = (
     ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
+STRAY_MM = QualityParams().detected_spread_refuse_mm  # detected landmarks this far (median) from the registered face: dropped
 BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate", "report"}
 
 
@@ -76,6 +77,22 @@ def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams =
     return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params)
 
 
+def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration]:
+    """Stage nonrigid, and the alignment it kept. Detected landmarks lying a median over STRAY_MM from
+    their places on the registered face (a colour image not registered to its depth: the quality
+    gates would refuse them) are dropped for the landmark-free alignment, if that passes the face check."""
+    reg = register_template(scan, alignment)
+    lm = alignment.landmarks
+    if lm.path == "user" or not reg.landmark_spread_mm > STRAY_MM:
+        return alignment, reg
+    why = f"the landmarks found by {lm.path} lay a median {reg.landmark_spread_mm:.1f} mm from their places on the registered face"
+    instead = landmark_free_alignment(scan, load_template(), why)
+    if instead is None:
+        return alignment, reg
+    alignment = Alignment(*instead)
+    return alignment, register_template(scan, alignment)
+
+
 @dataclass(frozen=True)
 class Design:
     """A custom cushion for a scan: every stage's result, the printable solid and its checks."""
@@ -114,7 +131,7 @@ def design(
     on_stage("landmarks and similarity")
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
-    reg = register_template(scan, al)
+    al, reg = registered(scan, al)
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)

@@ -154,6 +154,19 @@ def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
     assert fit["quality"]["landmark_spread_mm"] > GATES.detected_spread_flag_mm
 
 
+def test_a_colour_image_far_from_its_depth_is_designed_from_the_geometry(tmp_path, phantom1):
+    """Colour 32 px (~3 cm) to the side: the face MediaPipe finds fails the face check, so the
+    template is placed by the face's shape alone (it was refused as "no face found"); the design
+    says why, and lies within 1 mm of the truth."""
+    shifted = dataclasses.replace(phantom1, image=np.roll(phantom1.image, 32, axis=1))
+    write_files(tmp_path / "capture", capture_files(shifted.image, shifted.depth_raw, shifted.intrinsics, shifted.sensor.depth_scale))
+    d = design(load_scan(tmp_path / "capture"), "nasal")
+    assert d.alignment.landmarks.path == "fallback"
+    assert d.alignment.landmarks.note.endswith("the face found by image failed the face check")
+    region = load_template().regions["nasal"].band
+    assert np.linalg.norm(d.registration.vertices[region] - phantom1.surface[region], axis=1).mean() < 1.0
+
+
 def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):
     """Where the template missed the face the cushion's rim stands off the scanned skin (a mesh once
     gave 9 mm over 60 mm of rim): refused. One noisy sample 3 mm off is not a stretch of rim."""

@@ -1,5 +1,6 @@
 """Initial alignment of the template on a scan: landmarks (user, detected, or none) and a similarity."""
 
+from dataclasses import replace
 from typing import Iterator
 
 from ..scan import Scan
@@ -16,9 +17,10 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     """Landmarks, the similarity carrying the template onto the scan, and the face check.
 
     User landmarks override detection. Otherwise the first of these that lies on a face wins: the
-    detection; without one (on a mesh: or if it fails the face check), a detection on a render
-    from in front of the face the landmark-free fallback finds (meshes, and point clouds through a
-    surface over their points), then the fallback itself.
+    detection; a detection on a render from in front of the face the landmark-free fallback finds
+    (meshes, and point clouds through a surface over their points: a capture's own image is the best
+    view there is); the fallback itself. The winner's note names those that failed the face check
+    (a capture's colour image not registered to its depth puts the detected face off the scanned one).
     If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
     if user is not None:
@@ -26,12 +28,25 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
         candidates = [Detection(Landmarks(user.points, user.template_index, fit.weights, "user", "user landmarks file"), fit, len(user.points))]
     else:
         candidates = _candidates(scan, template)
+    failed = []
     for found in candidates:
         check = check_face(scan, template, found.similarity, central)
         if check.is_face:
             break
+        failed.append(found.landmarks.path)
     require_face(check, f"landmarks by {found.landmarks.path}")
-    return found.landmarks, found.similarity, check
+    landmarks = found.landmarks
+    if failed or landmarks.path == "fallback":
+        why = f"the face found by {' and '.join(failed)} failed the face check" if failed else "no face detected"
+        landmarks = replace(landmarks, note=f"{landmarks.note}; {why}")
+    return landmarks, found.similarity, check
+
+
+def landmark_free_alignment(scan: Scan, template: Template, why: str) -> tuple[Landmarks, Similarity, FaceCheck] | None:
+    """The landmark-free (fallback) alignment, its note saying `why` it was chosen, or None if it fails the face check."""
+    landmarks, fit = fallback_alignment(scan, template)
+    check = check_face(scan, template, fit, central_face(template))
+    return (replace(landmarks, note=f"{landmarks.note}; {why}"), fit, check) if check.is_face else None
 
 
 def _candidates(scan: Scan, template: Template) -> Iterator[Detection]:
@@ -39,8 +54,6 @@ def _candidates(scan: Scan, template: Template) -> Iterator[Detection]:
     detection = detect_landmarks(scan, template)
     if detection is not None:
         yield detection
-        if not scan.is_mesh:  # a capture's own image is the best view there is
-            return
     landmarks, fit = fallback_alignment(scan, template)
     front = None if scan.is_capture else detect_from_front(_renderable(scan, fit), template, fit)
     if front is not None:

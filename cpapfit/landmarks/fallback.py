@@ -80,6 +80,6 @@ def fallback_alignment(scan: Scan, template: Template) -> tuple[Landmarks, Simil
     coarse = sorted((icp_similarity(few, tree, s, iterations=4) for s in starts(scan, template)), key=lambda f: f.rms_mm)
     fit = min((icp_similarity(many, tree, s, iterations=30) for s in coarse[:KEEP]), key=lambda f: f.rms_mm)
     points = fit.apply(template.landmarks)
-    note = f"fallback: no face detected; multi-start ICP, {len(many)} template points, mean gap {fit.rms_mm:.2f} mm"
+    note = f"fallback: multi-start ICP, {len(many)} template points, mean gap {fit.rms_mm:.2f} mm"
     index = np.arange(N_LANDMARKS, dtype=np.int64)
     return Landmarks(points, index, np.zeros(N_LANDMARKS), "fallback", note), fit

@@ -18,8 +18,8 @@ class Landmarks:
     confidence: (K,) float64 in [0, 1]: the robust weight the landmark earned in the similarity
         fit (0 = rejected as disagreeing with the others), or 1 for user landmarks.
     path: how they were found: "image" (MediaPipe on the capture's colour image), "render"
-        (MediaPipe on an offscreen render of the mesh), "fallback" (no face detected: template
-        landmarks carried by a landmark-free alignment) or "user" (a landmarks file).
+        (MediaPipe on an offscreen render of the mesh), "fallback" (no face detected, or none
+        that passed the face check: template landmarks carried by a landmark-free alignment) or "user" (a landmarks file).
     note: one line on how they were found (view, rotation, counts).
     """
 

@@ -28,7 +28,8 @@ def landmark_notices(landmarks: Landmarks) -> list[Notice]:
     """Low landmark confidence, or no landmarks found on the face at all."""
     out = []
     if landmarks.path == "fallback":
-        out.append(Notice("check", "No face was detected in the image: the template was placed by its shape alone. "
+        why = landmarks.note.rsplit("; ", 1)[-1]  # the fallback's note ends with why it was needed
+        out.append(Notice("check", f"The template was placed by the face's shape alone ({why}). "
                                    "Check the landmarks and contact pictures."))
     low = landmarks.confidence < LOW_CONFIDENCE
     if low.mean() > LOW_CONFIDENCE_SHARE:
