@@ -18,7 +18,6 @@ for the levels that are not moderate, default --seeds.)
 """
 
 import argparse
-import dataclasses
 import platform
 import tempfile
 import time
@@ -37,16 +36,11 @@ from cpapfit.io.write import write_files
 from cpapfit.landmarks.detect import Detection, detect_landmarks
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.metrics import mask_region
-from cpapfit.phantom import ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_holes
+from cpapfit.phantom import ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_colour_shift, with_holes
 from cpapfit.pipeline import align, design
 from cpapfit.template import load_template
 
 REGION = mask_region(load_template())
-
-def shifted_colour(ph, px: int):
-    """The subject with its colour image moved `px` pixels sideways: a capture not registered to its depth."""
-    return dataclasses.replace(ph, image=np.roll(ph.image, px, axis=1))
-
 
 # (condition, level, moderate, how the subject is made):
 # subject(seed) -> (phantom, depth_scale factor, landmark noise mm[, user file])
@@ -65,7 +59,7 @@ CONDITIONS = [
     *[("scale error (depth_scale misstated)", f"x{x:g}", True, lambda s, x=x: (make_phantom(s, pose=FRAMED), x, 0.0))
       for x in (0.9, 1.1)],
     *[("colour image shifted sideways from its depth (px, ~mm)", f"{x}", False,
-       lambda s, x=x: (shifted_colour(make_phantom(s, pose=FRAMED), x), 1.0, 0.0)) for x in (8, 16)],
+       lambda s, x=x: (with_colour_shift(make_phantom(s, pose=FRAMED), x), 1.0, 0.0)) for x in (8, 16)],
     ("any pose (yaw, pitch +-25 deg, roll +-15 deg, anywhere in view)", "-", False, lambda s: (make_phantom(s, pose=ANY_POSE), 1.0, 0.0)),
 ]
 
@@ -107,7 +101,8 @@ def run(seed: int, ph, scale: float, sigma: float, user: bool = False) -> dict:
         return {"outcome": "refused", "reason": f"{type(exc).__name__}: {str(exc).split(':')[0][:60]}", "message": str(exc)}
     err = float(np.linalg.norm(d.registration.vertices[REGION] - scale * ph.surface[REGION], axis=1).mean())
     flags = [g.code for g in d.quality.flags]
-    return {"outcome": "made", "err": err, "flags": flags, "spread": round(d.registration.landmark_spread_mm, 2)}
+    return {"outcome": "made", "err": err, "flags": flags, "path": d.alignment.landmarks.path,
+            "spread": round(d.registration.landmark_spread_mm, 2)}
 
 
 def one(job: tuple[int, int]) -> dict:

@@ -80,9 +80,10 @@ def registration_summary(reg) -> str:
 
 def cmd_register(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
-    _, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
+    al, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
     write_bytes(Path(args.out), registration_ply(reg))
-    info(f"{scan.units_note}; {registration_summary(reg)} -> {args.out}")
+    rejected = f" ({al.landmarks.rejected})" if al.landmarks.rejected else ""
+    info(f"{scan.units_note}; landmarks by {al.landmarks.path}{rejected}; {registration_summary(reg)} -> {args.out}")
     return 0
 
 

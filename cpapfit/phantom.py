@@ -274,3 +274,9 @@ def with_holes(ph: Phantom, region: np.ndarray, fraction: float, seed: int = 0, 
         k = rng.integers(len(rows))
         holes |= (uu - cols[k]) ** 2 + (vv - rows[k]) ** 2 <= rng.uniform(*radius_px) ** 2
     return replace(ph, depth_raw=np.where(holes, 0, ph.depth_raw).astype(np.uint16))
+
+
+def with_colour_shift(ph: Phantom, px: int) -> Phantom:
+    """The phantom with its colour image moved `px` pixels sideways (wrapping round): a capture whose
+    colour is not registered to its depth. Depth and truth are unchanged."""
+    return replace(ph, image=np.roll(ph.image, px, axis=1))

@@ -16,8 +16,12 @@ Measured once the template is registered and the seal carried over (all mm):
   trust they were not given the paper's weight, and the file deserves a look. Detected ones lie
   2-5 mm from their places (the detector's own error); far more, and the image has drifted from
   the geometry: a colour image not registered to its depth (a shift of 8 px, ~8 mm, gives 6-8 mm),
-  or a texture misplaced on its mesh. The registration holds such landmarks only partly, and the
-  seal slides along the skin with them.
+  or colours misplaced on a mesh. The registration holds such landmarks only partly, and the
+  seal slides along the skin with them. Past the refusal threshold they are dropped before this
+  (`pipeline.registered`) if the face's shape alone places the template;
+- landmarks rejected: the template was placed by the face's shape alone after a detection was
+  rejected (its face failed the face check, or its landmarks lay far from the registered face):
+  always flagged, so that someone looks at why.
 
 Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
 threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
@@ -69,7 +73,7 @@ class QualityParams:
     landmarks_refuse_mm: float = 5.0
     landmark_spread_flag_mm: float = NonrigidParams().user_trust_mm
     landmark_spread_refuse_mm: float = 10.0
-    detected_spread_flag_mm: float = 6.0
+    detected_spread_flag_mm: float = 7.0
     detected_spread_refuse_mm: float = 10.0
     rim_gap_flag_mm: float = 1.0
     rim_gap_refuse_mm: float = 3.0
@@ -165,22 +169,32 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
                            f"the {landmarks.path} landmarks lie a median {off:.1f} mm off the scanned skin",
                            "they disagree with the geometry: check the landmarks file, or rescan"))
         if np.isfinite(registration.landmark_spread_mm):
-            gates.append(_spread_gate(landmarks.path, registration.landmark_spread_mm, p))
+            gates.append(_spread_gate(scan, landmarks.path, registration.landmark_spread_mm, p))
+    elif landmarks.rejected:
+        gates.append(Gate("landmarks_rejected", 1.0, True, False, f"{landmarks.rejected}, so the template was placed by the face's "
+                          f"shape alone; check the landmarks picture: {_image_cause(scan)}; or give landmarks with --landmarks"))
     return Quality(tuple(gates))
 
 
-def _spread_gate(path: str, spread: float, p: QualityParams) -> Gate:
+def _image_cause(scan: Scan) -> str:
+    """Why an image's face may disagree with a scan's geometry, in words."""
+    if scan.is_capture:
+        return "the colour image may not line up with the depth (register it to the depth image)"
+    if scan.colors is not None or scan.texture is not None:
+        return "the scan's colours may be misplaced on its surface, or the render misled the detector"
+    return "the shaded render misled the detector"
+
+
+def _spread_gate(scan: Scan, path: str, spread: float, p: QualityParams) -> Gate:
     """The landmarks' median distance (mm) from their places on the face the geometry gives: a
     user's file against its trust, detected landmarks against the detector's own error."""
     if path == "user":
         return _gate("landmark_spread_mm", spread, (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm),
                      f"the landmarks file's points lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
                      "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out")
-    cause = ("the colour image may not line up with the depth (register it to the depth image)" if path == "image"
-             else "the mesh's texture may be misplaced on it")
     return _gate("landmark_spread_mm", spread, (p.detected_spread_flag_mm, p.detected_spread_refuse_mm),
                  f"the landmarks detected on the {path} lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
-                 f"{cause}, or the image misled the detector: rescan, or give landmarks with --landmarks")
+                 f"{_image_cause(scan)}: rescan, or give landmarks with --landmarks")
 
 
 def require_quality(quality: Quality) -> Quality:

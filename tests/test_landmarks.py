@@ -396,21 +396,25 @@ def test_a_head_and_shoulders_mesh_in_mm_is_read_and_its_face_found(tmp_path, ph
     assert np.linalg.norm(registered[REGION] - truth[REGION], axis=1).mean() <= 1.0
 
 
-def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, phantom1_dir):
+def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, phantom1_dir, monkeypatch):
     """Detected landmarks lifted 15 mm to the side of their places (a colour image shifted from its
     depth): the registered face lies a median > 10 mm from them, so the template is placed by the face's
     shape alone and registered within 1 mm of the truth; landmarks where they belong are kept."""
     from dataclasses import replace
 
+    from cpapfit import pipeline
     from cpapfit.pipeline import align, registered
 
     scan = load_scan(phantom1_dir)
     al = align(scan)
     kept, reg = registered(scan, al)
-    assert kept == al and reg.landmark_spread_mm < 5.0
+    assert kept is al and reg.landmark_spread_mm < 5.0
     side = al.similarity.rotation[:, 0]
     moved = scan.vertices[cKDTree(scan.vertices).query(al.landmarks.points + 15.0 * side)[1]]
     stray = replace(al, landmarks=replace(al.landmarks, points=moved))
     instead, reg = registered(scan, stray)
-    assert instead.landmarks.path == "fallback" and "mm from their places on the registered face" in instead.landmarks.note
+    assert instead.landmarks.path == "fallback" and "mm from their places on the registered face" in instead.landmarks.rejected
     assert np.linalg.norm(reg.vertices[REGION] - phantom1.surface[REGION], axis=1).mean() <= 1.0
+    monkeypatch.setattr(pipeline, "landmark_free_alignment", lambda *args: None)  # the shape alone is no face
+    kept, reg = registered(scan, stray)
+    assert kept is stray and reg.landmark_spread_mm > pipeline.STRAY_MM  # kept, for the quality gates to refuse

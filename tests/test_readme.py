@@ -18,16 +18,22 @@ ROWS = {
     ("landmark_spread_mm", "detected landmarks"): ("detected_spread_flag_mm", "detected_spread_refuse_mm"),
     ("rim_gap_mm", ""): ("rim_gap_flag_mm", "rim_gap_refuse_mm"),
 }
+ALWAYS_FLAGGED = ("landmarks_rejected",)  # no threshold: flagged whenever it happens, never refused
+
+
+def table() -> list[list[str]]:
+    """The cells of each row of the README's gate table: code, measure, flagged, refused."""
+    rows = [re.match(r"\| `(\w+)` \| (.*) \| (.*) \| (.*) \|$", line) for line in README.read_text().splitlines()]
+    return [list(m.groups()) for m in rows if m and m.group(1) in {code for code, _ in ROWS} | set(ALWAYS_FLAGGED)]
 
 
 def gate_rows() -> list[tuple[str, str, float, float]]:
-    """(code, measure, flagged at, refused at) of each row of the README's gate table (% as fractions)."""
+    """(code, measure, flagged at, refused at) of each thresholded row (% as fractions)."""
     rows = []
-    for line in README.read_text().splitlines():
-        m = re.match(r"\| `(\w+)` \| (.*) \| [<>] ([\d.]+) (%|mm) \| [<>] ([\d.]+) (%|mm) \|$", line)
-        if m:
-            scale = 0.01 if m.group(4) == "%" else 1.0
-            rows.append((m.group(1), m.group(2), float(m.group(3)) * scale, float(m.group(5)) * scale))
+    for code, measure, flag, refuse in table():
+        m = [re.fullmatch(r"[<>] ([\d.]+) (%|mm)", cell) for cell in (flag, refuse)]
+        if code not in ALWAYS_FLAGGED:
+            rows.append((code, measure, *(float(x.group(1)) * (0.01 if x.group(2) == "%" else 1.0) for x in m)))
     return rows
 
 
@@ -38,6 +44,12 @@ def row_key(code: str, measure: str) -> tuple[str, str]:
 
 def test_every_gate_has_one_row():
     assert sorted(row_key(code, measure) for code, measure, *_ in gate_rows()) == sorted(ROWS)
+    assert [cells[2:] for cells in table() if cells[0] in ALWAYS_FLAGGED] == [["always", "never"]]
+
+
+def test_every_threshold_is_in_the_table():
+    fields = {f for f in vars(QualityParams()) if f.endswith(("_flag", "_refuse", "_flag_mm", "_refuse_mm"))}
+    assert fields == {f for pair in ROWS.values() for f in pair}
 
 
 @pytest.mark.parametrize("code,measure,flag,refuse", gate_rows())

@@ -19,9 +19,9 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     User landmarks override detection. Otherwise the first of these that lies on a face wins: the
     detection; a detection on a render from in front of the face the landmark-free fallback finds
     (meshes, and point clouds through a surface over their points: a capture's own image is the best
-    view there is); the fallback itself. The winner's note names those that failed the face check
-    (a capture's colour image not registered to its depth puts the detected face off the scanned one).
-    If none lies on a face the scan is refused (InputError)."""
+    view there is); the fallback itself. The winner's `rejected` names those that failed the face
+    check (a capture's colour image not registered to its depth puts the detected face off the
+    scanned one). If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
     if user is not None:
         fit = fit_similarity(template.vertices[user.template_index], user.points)
@@ -35,18 +35,15 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
             break
         failed.append(found.landmarks.path)
     require_face(check, f"landmarks by {found.landmarks.path}")
-    landmarks = found.landmarks
-    if failed or landmarks.path == "fallback":
-        why = f"the face found by {' and '.join(failed)} failed the face check" if failed else "no face detected"
-        landmarks = replace(landmarks, note=f"{landmarks.note}; {why}")
-    return landmarks, found.similarity, check
+    rejected = f"the face found by {' and '.join(dict.fromkeys(failed))} failed the face check" if failed else ""
+    return replace(found.landmarks, rejected=rejected), found.similarity, check
 
 
-def landmark_free_alignment(scan: Scan, template: Template, why: str) -> tuple[Landmarks, Similarity, FaceCheck] | None:
-    """The landmark-free (fallback) alignment, its note saying `why` it was chosen, or None if it fails the face check."""
+def landmark_free_alignment(scan: Scan, template: Template, rejected: str) -> tuple[Landmarks, Similarity, FaceCheck] | None:
+    """The landmark-free (fallback) alignment, saying what was `rejected` for it, or None if it fails the face check."""
     landmarks, fit = fallback_alignment(scan, template)
     check = check_face(scan, template, fit, central_face(template))
-    return (replace(landmarks, note=f"{landmarks.note}; {why}"), fit, check) if check.is_face else None
+    return (replace(landmarks, rejected=rejected), fit, check) if check.is_face else None
 
 
 def _candidates(scan: Scan, template: Template) -> Iterator[Detection]:

@@ -71,7 +71,8 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "cpapfit_version": __version__, "units": "mm", "source": scan.source, "scan_units": scan.units,
         "mask": d.contact.mask,
         **d.quality.record(),  # rescan_advised, warnings, quality
-        "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points), "note": d.alignment.landmarks.note},
+        "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points), "note": d.alignment.landmarks.note,
+                      "rejected": d.alignment.landmarks.rejected},
         "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
                          "residual_median_mm": float(np.median(reg.residual[reg.valid])),
                          "landmark_weight_factor": reg.landmark_factor,

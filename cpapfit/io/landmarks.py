@@ -45,7 +45,7 @@ def read_landmarks(path: Path, units: str, n_template: int) -> Landmarks:
 def landmarks_record(lm: Landmarks) -> dict:
     """The JSON record of landmarks (mm, scan frame)."""
     return {
-        "units": "mm", "path": lm.path, "note": lm.note,
+        "units": "mm", "path": lm.path, "note": lm.note, "rejected": lm.rejected,
         "points": np.round(lm.points, 4).tolist(),
         "template_index": lm.template_index.tolist(),
         "confidence": np.round(lm.confidence, 4).tolist(),

@@ -21,6 +21,8 @@ class Landmarks:
         (MediaPipe on an offscreen render of the mesh), "fallback" (no face detected, or none
         that passed the face check: template landmarks carried by a landmark-free alignment) or "user" (a landmarks file).
     note: one line on how they were found (view, rotation, counts).
+    rejected: what was found and rejected before them, in words (a detected face that failed the
+        face check, or detected landmarks that lay far from the registered face); "" if nothing was.
     """
 
     points: np.ndarray
@@ -28,6 +30,7 @@ class Landmarks:
     confidence: np.ndarray
     path: str
     note: str = ""
+    rejected: str = ""
 
     def __post_init__(self):
         freeze_arrays(self)

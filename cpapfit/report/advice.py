@@ -25,17 +25,15 @@ class Notice:
 
 
 def landmark_notices(landmarks: Landmarks) -> list[Notice]:
-    """Low landmark confidence, or no landmarks found on the face at all."""
-    out = []
-    if landmarks.path == "fallback":
-        why = landmarks.note.rsplit("; ", 1)[-1]  # the fallback's note ends with why it was needed
-        out.append(Notice("check", f"The template was placed by the face's shape alone ({why}). "
-                                   "Check the landmarks and contact pictures."))
+    """No landmarks found on the face (the template placed by its shape alone), or low landmark confidence."""
+    if landmarks.path == "fallback":  # its landmarks are the template's, carried: no confidence to judge
+        return [Notice("check", f"The template was placed by the face's shape alone ({landmarks.rejected or 'no face was detected'}). "
+                                "Check the landmarks and contact pictures.")]
     low = landmarks.confidence < LOW_CONFIDENCE
-    if low.mean() > LOW_CONFIDENCE_SHARE:
-        out.append(Notice("check", f"{low.sum()} of {len(low)} landmarks ({100 * low.mean():.0f} %) disagree with the others "
-                                   f"(confidence below {LOW_CONFIDENCE}): check that the template sits on the face."))
-    return out
+    if low.mean() <= LOW_CONFIDENCE_SHARE:
+        return []
+    return [Notice("check", f"{low.sum()} of {len(low)} landmarks ({100 * low.mean():.0f} %) disagree with the others "
+                            f"(confidence below {LOW_CONFIDENCE}): check that the template sits on the face.")]
 
 
 def gate_notices(fit: dict) -> list[Notice]:
