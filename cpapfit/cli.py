@@ -219,7 +219,8 @@ def cmd_landmarks(args) -> int:
         "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),
                        "landmark_rms_mm": fit.rms_mm, "note": "template (mm) -> scan (mm): x -> scale * R x + t"},
         "face_check": {"coverage": al.check.coverage, "median_gap_mm": al.check.median_gap_mm, "nose_above_sides_mm": al.check.ridge_mm,
-                       "nose_above_lip_mm": al.check.below_mm},
+                       "nose_above_lip_mm": al.check.below_mm,
+                       "turned_from_camera_deg": None if np.isnan(al.check.turned_deg) else al.check.turned_deg},
         "source": str(args.scan), "scan_units": scan.units,
     }
     write_bytes(Path(args.out), json_bytes(record))

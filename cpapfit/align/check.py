@@ -13,7 +13,10 @@ Measures of the template's central face, carried by the similarity onto the scan
   a shaded render pass);
 - scale: the similarity's, template to scan. Adult faces differ from the template (an average
   adult's) by ~10 % in size; a face "found" at half or twice its size is another shape mistaken
-  for one (a render's shading, a face seen at the wrong distance), or a scan in other units.
+  for one (a render's shading, a face seen at the wrong distance), or a scan in other units;
+- turned (a capture only): the angle between the face's forward direction and the way from its nose
+  tip to the camera. A camera sees a face from in front; a template facing away from it lies on the
+  inside of a face shell seen from behind (a hollow mask), whose points are a face's.
 """
 
 from dataclasses import dataclass
@@ -35,12 +38,13 @@ PEAK_LAYER_MM = 2.0  # the nose tip: the middle of the scan's top layer this thi
 PROBE_MM = 4.0
 TOP_LAYER_PERCENTILE = 75.0
 
-# Thresholds: a face passes all three.
+# Thresholds: a face passes all of them.
 MIN_COVERAGE = 0.5
 MAX_MEDIAN_GAP_MM = 3.5
 MIN_RIDGE_MM = 6.0
 MIN_BELOW_MM = 8.0
 SCALE_RANGE = (0.7, 1.4)
+MAX_TURNED_DEG = 90.0
 
 
 @dataclass(frozen=True)
@@ -48,20 +52,22 @@ class FaceCheck:
     """coverage: fraction of central template points with the scan within 10 mm; median_gap_mm over
     those; ridge_mm, below_mm: how far the scan's nose tip stands out above the scan beside it and
     below it (a box's edge is a ridge but not a peak; NaN where the scan has no data there, which
-    fails); scale: the template's size on the scan."""
+    fails); scale: the template's size on the scan; turned_deg: the face's forward direction from the
+    way to the camera, degrees (NaN for a mesh or point cloud: any orientation)."""
 
     coverage: float
     median_gap_mm: float
     ridge_mm: float
     below_mm: float
     scale: float
+    turned_deg: float = np.nan
 
     @property
     def is_face(self) -> bool:
         return (
             self.coverage >= MIN_COVERAGE and self.median_gap_mm <= MAX_MEDIAN_GAP_MM
             and self.ridge_mm >= MIN_RIDGE_MM and self.below_mm >= MIN_BELOW_MM
-            and SCALE_RANGE[0] <= self.scale <= SCALE_RANGE[1]
+            and SCALE_RANGE[0] <= self.scale <= SCALE_RANGE[1] and not self.turned_deg > MAX_TURNED_DEG
         )
 
     def describe(self) -> str:
@@ -72,6 +78,7 @@ class FaceCheck:
             f"{100 * self.coverage:.0f} % of the central face covered (needs {100 * MIN_COVERAGE:.0f} %), median gap "
             f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {sides} and {below}, "
             f"template scaled x{self.scale:.2f} (an adult face: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g})"
+            + (f", facing {self.turned_deg:.0f} deg away from the camera (at most {MAX_TURNED_DEG:g})" if np.isfinite(self.turned_deg) else "")
         )
 
 
@@ -83,7 +90,18 @@ def check_face(scan: Scan, template: Template, similarity: Similarity, central: 
     covered = dist < COVER_MM
     plane = np.abs(np.einsum("ij,ij->i", pts - scan.vertices[idx], scan.normals[idx]))
     gap = float(np.median(plane[covered])) if covered.any() else np.inf
-    return FaceCheck(float(covered.mean()), gap, *_nose(tree, scan, template, similarity), float(similarity.scale))
+    return FaceCheck(float(covered.mean()), gap, *_nose(tree, scan, template, similarity), float(similarity.scale),
+                     _turned(scan, template, similarity))
+
+
+def _turned(scan: Scan, template: Template, similarity: Similarity) -> float:
+    """Degrees between the aligned face's forward direction and the way from its nose tip to a
+    capture's camera (at the origin); NaN for other scans."""
+    if not scan.is_capture:
+        return np.nan
+    tip = similarity.apply(template.vertices[[NOSE_TIP]])[0]
+    cos = float(similarity.rotation[:, 2] @ (-tip / np.linalg.norm(tip)))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
 def nose_peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) -> np.ndarray:
