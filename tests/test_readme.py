@@ -18,7 +18,7 @@ ROWS = {
     ("landmark_spread_mm", "detected landmarks"): ("detected_spread_flag_mm", "detected_spread_refuse_mm"),
     ("rim_gap_mm", ""): ("rim_gap_flag_mm", "rim_gap_refuse_mm"),
 }
-ALWAYS_FLAGGED = ("landmarks_rejected",)  # no threshold: flagged whenever it happens, never refused
+ALWAYS_FLAGGED = ("landmark_free",)  # no threshold: flagged whenever it happens, never refused
 
 
 def table() -> list[list[str]]:

@@ -157,10 +157,21 @@ def test_a_colour_image_far_from_its_depth_is_designed_from_the_geometry(tmp_pat
     template is placed by the face's shape alone (it was refused as "no face found"); the design is
     flagged saying why, and lies within 1 mm of the truth."""
     codes, err = design_flags(tmp_path, with_colour_shift(phantom1, 32))
-    assert codes == ["landmarks_rejected"] and "the face found by image failed the face check" in err, err
+    assert codes == ["landmark_free"] and "the face found by image failed the face check" in err, err
     registered = trimesh.load(tmp_path / "out" / "registered_template.ply", process=False).vertices
     region = load_template().regions["nasal"].band
     assert np.linalg.norm(registered[region] - phantom1.surface[region], axis=1).mean() < 1.0
+
+
+def test_a_capture_without_colour_is_designed_from_the_shape_and_flagged(tmp_path, phantom1):
+    """No colour image: no face to detect, the template placed by the shape alone; flagged, since on a
+    real face that can put the seal a few mm from where landmarks put it."""
+    write_files(tmp_path / "capture", capture_files(phantom1.image, phantom1.depth_raw, phantom1.intrinsics, phantom1.sensor.depth_scale))
+    (tmp_path / "capture" / "color.png").unlink()
+    code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out")
+    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert code == 0 and fit["landmarks"]["path"] == "fallback", err
+    assert [w["code"] for w in fit["warnings"]] == ["landmark_free"] and "no face was detected" in err
 
 
 def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):
