@@ -63,7 +63,7 @@ def alignment_summaries(al: Alignment) -> dict[str, str]:
     """One line each for the landmarks and similarity stages."""
     lm, fit = al.landmarks, al.similarity
     return {
-        "landmarks": f"{len(lm.points)} landmarks by {lm.path} ({lm.note})",
+        "landmarks": f"{len(lm.points)} landmarks by {lm.path} ({lm.note}{'; ' + lm.rejected if lm.rejected else ''})",
         "similarity": f"scale {fit.scale:.3f}, landmark RMS {fit.rms_mm:.1f} mm; face check: {al.check.describe()}",
     }
 

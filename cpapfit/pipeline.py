@@ -86,7 +86,7 @@ def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registratio
     if lm.path == "user" or not reg.landmark_spread_mm > STRAY_MM:
         return alignment, reg
     why = f"the landmarks found by {lm.path} lay a median {reg.landmark_spread_mm:.1f} mm from their places on the registered face"
-    instead = landmark_free_alignment(scan, load_template(), why)
+    instead = landmark_free_alignment(scan, load_template(), "; ".join(filter(None, (lm.rejected, why))))
     if instead is None:
         return alignment, reg
     alignment = Alignment(*instead)

@@ -15,14 +15,14 @@ Measured once the template is registered and the seal carried over (all mm):
   detected landmarks' weight (`Registration.landmark_spread_mm`). A user's: past the registration's
   trust they were not given the paper's weight, and the file deserves a look. Detected ones lie
   2-5 mm from their places (the detector's own error); far more, and the image has drifted from
-  the geometry: a colour image not registered to its depth (a shift of 8 px, ~8 mm, gives 6-8 mm),
+  the geometry: a colour image not registered to its depth (a shift of 8 px, ~8 mm, gives 6-9 mm),
   or colours misplaced on a mesh. The registration holds such landmarks only partly, and the
   seal slides along the skin with them. Past the refusal threshold they are dropped before this
   (`pipeline.registered`) if the face's shape alone places the template;
 - landmark-free: the template was placed by the face's shape alone (no face detected, or a
   detection rejected: its face failed the face check, or its landmarks lay far from the registered
   face). On synthetic subjects that is as good as landmarks; on the shared real face (fran) it put
-  the seal curve 2.0 mm (at most 5.5 mm) from where the detected landmarks put it: always flagged.
+  the seal curve 1.8-2.2 mm (at most 5.7 mm) from where the detected landmarks put it: always flagged.
 
 Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
 threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
@@ -172,9 +172,9 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         if np.isfinite(registration.landmark_spread_mm):
             gates.append(_spread_gate(scan, landmarks.path, registration.landmark_spread_mm, p))
     else:
-        why, cause = (landmarks.rejected, _image_cause(scan)) if landmarks.rejected else ("no face was detected", "light the face evenly")
+        why, cause = (landmarks.rejected, _image_cause(scan)) if landmarks.rejected else ("no face was detected", _no_face_cause(scan))
         gates.append(Gate("landmark_free", 1.0, True, False, f"{why}, so the template was placed by the face's shape alone, which on a "
-                          f"real face can put the seal a few mm from where landmarks put it; check the landmarks picture: {cause}; "
+                          f"real face can put the seal a few mm from where landmarks put it; check the landmarks picture ({cause}), "
                           "or give landmarks with --landmarks"))
     return Quality(tuple(gates))
 
@@ -186,6 +186,13 @@ def _image_cause(scan: Scan) -> str:
     if scan.colors is not None or scan.texture is not None:
         return "the scan's colours may be misplaced on its surface, or the render misled the detector"
     return "the shaded render misled the detector"
+
+
+def _no_face_cause(scan: Scan) -> str:
+    """Why no face may have been detected on a scan, in words."""
+    if scan.is_capture:
+        return "the capture has no colour image: add color.png" if scan.image is None else "light the face evenly, facing the camera"
+    return "the detector found no face on the scan's render"
 
 
 def _spread_gate(scan: Scan, path: str, spread: float, p: QualityParams) -> Gate:

@@ -172,6 +172,7 @@ def test_a_capture_without_colour_is_designed_from_the_shape_and_flagged(tmp_pat
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
     assert code == 0 and fit["landmarks"]["path"] == "fallback", err
     assert [w["code"] for w in fit["warnings"]] == ["landmark_free"] and "no face was detected" in err
+    assert "the capture has no colour image: add color.png" in err
 
 
 def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):

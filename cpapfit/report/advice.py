@@ -25,12 +25,10 @@ class Notice:
 
 
 def landmark_notices(landmarks: Landmarks) -> list[Notice]:
-    """No landmarks found on the face (the template placed by its shape alone), or low landmark confidence."""
-    if landmarks.path == "fallback":  # its landmarks are the template's, carried: no confidence to judge
-        return [Notice("check", f"The template was placed by the face's shape alone ({landmarks.rejected or 'no face was detected'}). "
-                                "Check the landmarks and contact pictures.")]
+    """Low landmark confidence (a design placed by the face's shape alone is a quality gate's to flag:
+    its landmarks are the template's, carried, with no confidence to judge)."""
     low = landmarks.confidence < LOW_CONFIDENCE
-    if low.mean() <= LOW_CONFIDENCE_SHARE:
+    if landmarks.path == "fallback" or low.mean() <= LOW_CONFIDENCE_SHARE:
         return []
     return [Notice("check", f"{low.sum()} of {len(low)} landmarks ({100 * low.mean():.0f} %) disagree with the others "
                             f"(confidence below {LOW_CONFIDENCE}): check that the template sits on the face.")]
