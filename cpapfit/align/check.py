@@ -78,7 +78,7 @@ class FaceCheck:
             f"{100 * self.coverage:.0f} % of the central face covered (needs {100 * MIN_COVERAGE:.0f} %), median gap "
             f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {sides} and {below}, "
             f"template scaled x{self.scale:.2f} (an adult face: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g})"
-            + (f", facing {self.turned_deg:.0f} deg away from the camera (at most {MAX_TURNED_DEG:g})" if np.isfinite(self.turned_deg) else "")
+            + (f", turned {self.turned_deg:.0f} deg from the camera (at most {MAX_TURNED_DEG:g})" if np.isfinite(self.turned_deg) else "")
         )
 
 
