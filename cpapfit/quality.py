@@ -199,12 +199,13 @@ def _spread_gate(scan: Scan, path: str, spread: float, p: QualityParams) -> Gate
     """The landmarks' median distance (mm) from their places on the face the geometry gives: a
     user's file against its trust, detected landmarks against the detector's own error."""
     if path == "user":
-        return _gate("landmark_spread_mm", spread, (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm),
-                     f"the landmarks file's points lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
-                     "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out")
-    return _gate("landmark_spread_mm", spread, (p.detected_spread_flag_mm, p.detected_spread_refuse_mm),
-                 f"the landmarks detected on the {path} lie a median {spread:.1f} mm from their places on the face the scan's geometry gives",
-                 f"{_image_cause(scan)}: rescan, or give landmarks with --landmarks")
+        limits, whose = (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm), "the landmarks file's points"
+        advice = "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out"
+    else:
+        limits, whose = (p.detected_spread_flag_mm, p.detected_spread_refuse_mm), f"the landmarks detected on the {path}"
+        advice = f"{_image_cause(scan)}: rescan, or give landmarks with --landmarks"
+    return _gate("landmark_spread_mm", spread, limits,
+                 f"{whose} lie a median {spread:.1f} mm from their places on the face the scan's geometry gives", advice)
 
 
 def require_quality(quality: Quality) -> Quality:
