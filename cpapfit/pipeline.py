@@ -19,6 +19,7 @@ from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
+from .proportions import proportions
 from .quality import Quality, QualityParams, assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
@@ -139,7 +140,8 @@ def design(
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
     edge = neutral.grid(256, 2)[:, 0]
     rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
-    quality = require_quality(assess(scan, al.landmarks, reg, contact, rim))  # or refuse: rescan
+    shape = proportions(load_template().vertices, al.similarity, reg)
+    quality = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape))  # or refuse: rescan
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)

@@ -22,7 +22,12 @@ Measured once the template is registered and the seal carried over (all mm):
 - landmark-free: the template was placed by the face's shape alone (no face detected, or a
   detection rejected: its face failed the face check, or its landmarks lay far from the registered
   face). On synthetic subjects that is as good as landmarks; on the shared real face (fran) it put
-  the seal curve 1.8-2.2 mm (at most 5.7 mm) from where the detected landmarks put it: always flagged.
+  the seal curve 1.8-2.2 mm (at most 5.7 mm) from where the detected landmarks put it: always flagged;
+- face size and depth ratio (`proportions.py`): the registered face's size, and its depth for its
+  breadth, against the template's (an adult's). A scale or units misstated makes the face, and the
+  mask, that much too small or large; a focal length misstated by k makes it k times too deep for
+  its breadth. Adult faces lie well inside the flag thresholds, so a face past them is more likely
+  a misstated scan than a face, and it is said which setting to check.
 
 Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
 threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
@@ -39,6 +44,7 @@ from .errors import QualityError
 from .evaluate.gap import SPACINGS, RimGap, off_skin
 from .evaluate.rim import spacing
 from .landmarks.types import Landmarks
+from .proportions import Proportions
 from .scan import Scan
 from .template import load_template
 
@@ -59,6 +65,10 @@ class QualityParams:
     rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
         median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
         it by construction (<= 0.6 mm), unless the template missed the face there.
+    small_face_* / large_face_*: the face's size against the template's (`Proportions.size`, bad
+        below / above).
+    flat_face_* / deep_face_*: its depth for its breadth against the template's
+        (`Proportions.depth_ratio`, bad below / above).
     Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
     flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin.
     """
@@ -78,6 +88,14 @@ class QualityParams:
     detected_spread_refuse_mm: float = 10.0
     rim_gap_flag_mm: float = 1.0
     rim_gap_refuse_mm: float = 3.0
+    small_face_flag: float = 0.8
+    small_face_refuse: float = 0.7
+    large_face_flag: float = 1.25
+    large_face_refuse: float = 1.5
+    flat_face_flag: float = 0.85
+    flat_face_refuse: float = 0.77
+    deep_face_flag: float = 1.18
+    deep_face_refuse: float = 1.3
 
 
 @dataclass(frozen=True)
@@ -138,9 +156,9 @@ def longest_run(bad: np.ndarray) -> int:
 
 
 def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact: Contact, rim: RimGap,
-           params: QualityParams = QualityParams()) -> Quality:
-    """The gates for the landmarks, the registration, the seal it carried onto `scan` and the rim of
-    the cushion designed on it."""
+           shape: Proportions, params: QualityParams = QualityParams()) -> Quality:
+    """The gates for the landmarks, the registration and the face's `shape` it gives, the seal it
+    carried onto `scan` and the rim of the cushion designed on it."""
     p, mask = params, contact.mask
     tree = cKDTree(scan.vertices)
     reach = max(p.near_mm, SPACINGS * spacing(tree))
@@ -176,7 +194,28 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         gates.append(Gate("landmark_free", 1.0, True, False, f"{why}, so the template was placed by the face's shape alone, which on a "
                           f"real face can put the seal a few mm from where landmarks put it; check the landmarks picture ({cause}), "
                           "or give landmarks with --landmarks"))
-    return Quality(tuple(gates))
+    return Quality(tuple(gates + _shape_gates(scan, shape, p)))
+
+
+def _shape_gates(scan: Scan, shape: Proportions, p: QualityParams) -> list[Gate]:
+    """The face's depth ratio and size against the template's, each judged on the side it lies
+    (none when too little of the face was matched to tell). The depth ratio comes first: off, it
+    points to the focal length, which also shrinks or swells the size."""
+    if not np.isfinite([shape.size, shape.depth_ratio]).all():
+        return []
+    small, flat = shape.size < 1.0, shape.depth_ratio < 1.0
+    if scan.is_capture:
+        scale, focal = "the capture's depth scale and intrinsics (fx, fy)", "the capture's intrinsics (fx, fy)"
+    else:
+        scale, focal = "the scan's units (state them with --units)", "how the scan was exported (it may be stretched)"
+    return [
+        _gate("depth_ratio", shape.depth_ratio, (p.flat_face_flag, p.flat_face_refuse) if flat else (p.deep_face_flag, p.deep_face_refuse),
+              f"the face is {100 * shape.depth_ratio:.0f} % as deep for its breadth as an adult's (the template's)",
+              f"check {focal}: a focal length misstated by k makes the face k times too deep and the mask k times too narrow", " %"),
+        _gate("face_size", shape.size, (p.small_face_flag, p.small_face_refuse) if small else (p.large_face_flag, p.large_face_refuse),
+              f"the face measures {100 * shape.size:.0f} % of an adult's (the template's)",
+              f"check {scale}: misstated, they make the mask as much too {'small' if small else 'large'}", " %"),
+    ]
 
 
 def _image_cause(scan: Scan) -> str:

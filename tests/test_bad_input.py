@@ -197,6 +197,14 @@ def _(d, s):
     return [d], ["depth_scale"]
 
 
+@case("intrinsics of a camera with twice the resolution")
+def _(d, s):
+    folder = capture(d, s)
+    k = json.loads((folder / "intrinsics.json").read_text())["intrinsic_matrix"]
+    edit_intrinsics(folder, intrinsic_matrix=[2 * k[0], *k[1:4], 2 * k[4], *k[5:]])  # the face half as wide and high
+    return [d], ["face_size", "intrinsics (fx, fy)"]
+
+
 @case("depth and colour of different sizes")
 def _(d, s):
     save_png(capture(d, s) / "color.png", s.ph.image[::2, ::2])

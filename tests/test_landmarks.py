@@ -310,6 +310,8 @@ def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
     assert shrunk.coverage >= 0.5 and not shrunk.is_face and "scaled x0.5" in shrunk.describe()
     with pytest.raises(InputError, match="are its units right"):
         require_face(shrunk, "a render")
+    with pytest.raises(InputError, match="are its depth scale and intrinsics this camera's"):
+        require_face(shrunk, "a capture", capture=True)
 
 
 def test_a_noisy_depth_camera_does_not_hide_the_face(tmp_path):

@@ -17,6 +17,10 @@ ROWS = {
     ("landmark_spread_mm", "a landmarks file"): ("landmark_spread_flag_mm", "landmark_spread_refuse_mm"),
     ("landmark_spread_mm", "detected landmarks"): ("detected_spread_flag_mm", "detected_spread_refuse_mm"),
     ("rim_gap_mm", ""): ("rim_gap_flag_mm", "rim_gap_refuse_mm"),
+    ("face_size", "smaller"): ("small_face_flag", "small_face_refuse"),
+    ("face_size", "larger"): ("large_face_flag", "large_face_refuse"),
+    ("depth_ratio", "flatter"): ("flat_face_flag", "flat_face_refuse"),
+    ("depth_ratio", "deeper"): ("deep_face_flag", "deep_face_refuse"),
 }
 ALWAYS_FLAGGED = ("landmark_free",)  # no threshold: flagged whenever it happens, never refused
 

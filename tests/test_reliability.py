@@ -2,6 +2,7 @@
 and no network (sockets blocked)."""
 
 import contextlib
+import dataclasses
 import io
 import json
 import multiprocessing
@@ -28,6 +29,7 @@ from cpapfit.io.write import write_files
 from cpapfit.phantom import SensorModel, make_phantom, with_colour_shift, with_holes
 from cpapfit.evaluate.gap import RimGap
 from cpapfit.errors import QualityError
+from cpapfit.proportions import proportions
 from cpapfit.quality import QualityParams, assess, longest_run, require_quality
 from cpapfit.template import load_template
 
@@ -96,6 +98,16 @@ def test_a_clean_subject_trips_no_gate(twice):
     assert "rescan advised" not in err
 
 
+def test_a_clean_subject_has_its_true_proportions(twice, phantom1):
+    """Size and depth for breadth as the generator made them (its overall scale, and the face's width
+    and height stretched; its local changes of nose and chin move the depth ratio by up to ~0.07)."""
+    q = json.loads((twice[0]["plain"][2] / "fit.json").read_text())["quality"]
+    p = phantom1.identity
+    breadth = np.sqrt(p["face_width"] * p["face_height"])
+    assert q["face_size"] == pytest.approx(p["scale"] * breadth, abs=0.03)
+    assert q["depth_ratio"] == pytest.approx(1.0 / breadth, abs=0.08)
+
+
 def design_flags(tmp_path, ph, *extra) -> tuple[list[str], str]:
     """Design a subject's capture; the codes of the gates it flags, and stderr."""
     write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
@@ -104,6 +116,33 @@ def design_flags(tmp_path, ph, *extra) -> tuple[list[str], str]:
     fit = json.loads((tmp_path / "out" / "fit.json").read_text())
     assert fit["rescan_advised"] is True and "rescan advised" in err
     return [w["code"] for w in fit["warnings"]], err
+
+
+def with_intrinsics(ph, focal: float = 1.0):
+    """The subject's capture with its focal length stated `focal` times too long."""
+    return dataclasses.replace(ph, intrinsics=dataclasses.replace(ph.intrinsics, fx=ph.intrinsics.fx * focal, fy=ph.intrinsics.fy * focal))
+
+
+def test_a_misstated_focal_length_is_flagged(tmp_path, phantom1, twice):
+    """Intrinsics whose focal length is 1.3 times too long (another camera's, or another resolution's)
+    make the face 1.3 times too narrow and short for its depth, and the mask as much too small; the
+    shape fits as well as ever, so only the face's proportions tell: flagged, saying what to check."""
+    clean = json.loads((twice[0]["plain"][2] / "fit.json").read_text())["quality"]
+    codes, err = design_flags(tmp_path, with_intrinsics(phantom1, 1.3))
+    q = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
+    assert codes and set(codes) <= {"depth_ratio", "face_size"} and "intrinsics (fx, fy)" in err, err
+    assert q["face_size"] / clean["face_size"] == pytest.approx(1 / 1.3, abs=0.03)
+    assert 1.15 < q["depth_ratio"] / clean["depth_ratio"] < 1.3
+
+
+def test_a_misstated_depth_scale_is_flagged(tmp_path, phantom1):
+    """A depth scale 1.4 times too large: the whole face, and the mask, 1.4 times too small
+    (in proportion: the shape alone cannot tell), smaller than adults' faces are: flagged."""
+    stated = dataclasses.replace(phantom1, sensor=dataclasses.replace(phantom1.sensor, depth_scale=phantom1.sensor.depth_scale * 1.4))
+    codes, err = design_flags(tmp_path, stated)
+    assert codes == ["face_size"] and "check the capture's depth scale" in err, err
+    q = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
+    assert q["face_size"] == pytest.approx(phantom1.identity["scale"] * np.sqrt(phantom1.identity["face_width"] * phantom1.identity["face_height"]) / 1.4, abs=0.03)
 
 
 def test_holes_under_the_seal_are_flagged(tmp_path, phantom1):
@@ -175,6 +214,11 @@ def test_a_capture_without_colour_is_designed_from_the_shape_and_flagged(tmp_pat
     assert "the capture has no colour image: add color.png" in err
 
 
+def shape_of(d):
+    """The proportions of a design's registered face."""
+    return proportions(load_template().vertices, d.alignment.similarity, d.registration)
+
+
 def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp_path):
     """Where the template missed the face the cushion's rim stands off the scanned skin (a mesh once
     gave 9 mm over 60 mm of rim): refused. One noisy sample 3 mm off is not a stretch of rim."""
@@ -184,7 +228,7 @@ def test_a_rim_off_the_skin_is_refused_and_one_noisy_sample_is_not(designed, tmp
     assert d.quality.record()["quality"]["rim_gap_mm"] < GATES.rim_gap_flag_mm
     off_skin = RimGap(np.where(np.arange(256) < 60, 9.0, d.rim.gap), d.rim.covered | (np.arange(256) < 60))
     with pytest.raises(QualityError, match="rim stands up to 9.0 mm off the scanned skin"):
-        require_quality(assess(scan, d.alignment.landmarks, d.registration, d.contact, off_skin))
+        require_quality(assess(scan, d.alignment.landmarks, d.registration, d.contact, off_skin, shape_of(d)))
     spike = np.zeros(256)
     spike[100] = 3.0
     assert RimGap(spike, np.ones(256, dtype=bool)).worst_stretch_mm() == 0.0

@@ -151,8 +151,9 @@ def _first(heights) -> float:
     return next((h for h in heights if np.isfinite(h)), np.nan)
 
 
-def require_face(check: FaceCheck, how: str) -> None:
-    """Raise a clear error when the alignment does not lie on a face."""
+def require_face(check: FaceCheck, how: str, capture: bool = False) -> None:
+    """Raise a clear error when the alignment does not lie on a face (of a `capture`: an RGB-D frame)."""
     if not check.is_face:
-        units = "" if SCALE_RANGE[0] <= check.scale <= SCALE_RANGE[1] else " (or are its units right? state them with --units)"
+        scale = "are its depth scale and intrinsics this camera's?" if capture else "are its units right? state them with --units"
+        units = "" if SCALE_RANGE[0] <= check.scale <= SCALE_RANGE[1] else f" (or {scale})"
         raise InputError(f"no face found ({how}): {check.describe()}; is this a face scan, facing the sensor{units}?")

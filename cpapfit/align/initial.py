@@ -34,7 +34,7 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
         if check.is_face:
             break
         failed.append(found.landmarks.path)
-    require_face(check, f"landmarks by {found.landmarks.path}")
+    require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture)
     rejected = f"the face found by {' and '.join(dict.fromkeys(failed))} failed the face check" if failed else ""
     return replace(found.landmarks, rejected=rejected), found.similarity, check
 
