@@ -1,5 +1,6 @@
 """Robustness study (issue 9): synthetic subjects under landmark noise, holes over the mask region,
-sensor noise, a cheap camera far away, head yaw, scale errors and a colour image not registered to its depth, each designed end to end (`pipeline.design`, nasal mask).
+sensor noise, a cheap camera far away, head yaw, a misstated depth scale or focal length and a colour image
+not registered to its depth, each designed end to end (`pipeline.design`, nasal mask).
 
 One factor at a time: every condition starts from a capture an operator framed (`phantom.FRAMED`:
 yaw and pitch within +-10 deg, roll +-6 deg, the face near the middle of the frame) and changes one
@@ -11,6 +12,9 @@ Success = the design is made (not refused, printable cushion) and the registered
 region (both contact bands) lies within 1 mm (and, separately, 2 mm) mean of its true position.
 Also counted: refused (with the gate or check that refused), flagged "rescan advised", and
 silently wrong (made, not flagged, mean error over 2 mm) -- the outcome a clinic must never get.
+A misstated depth scale or focal length is measured against the truth as the scan shows it (the
+registration's own error): the mask is then as much too large or small as the scan, which only
+the face's proportions can tell (`face_size`, `depth_ratio`: see the flagged and refused columns).
 
 Usage: .venv/bin/python bench/robustness.py [--seeds 5] [--other-seeds N] [--first 100] [--workers 2]
 (seeds 100+ by default: the quality gates were calibrated on seeds 0-13; --other-seeds: how many
@@ -22,6 +26,7 @@ import platform
 import tempfile
 import time
 from collections import defaultdict
+from dataclasses import replace
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from unittest.mock import patch
@@ -42,25 +47,27 @@ from cpapfit.template import load_template
 
 REGION = mask_region(load_template())
 
-# (condition, level, moderate, how the subject is made):
-# subject(seed) -> (phantom, depth_scale factor, landmark noise mm[, user file])
+# (condition, level, moderate, how the subject is made): subject(seed) -> run()'s keywords: the
+# phantom, and what is misstated or added (depth_scale and focal length factors, landmark noise mm, a user file)
 CONDITIONS = [
-    ("clean", "-", True, lambda s: (make_phantom(s, pose=FRAMED), 1.0, 0.0)),
-    *[("detected landmark noise sigma (mm)", f"{x:g}", x <= 2, lambda s, x=x: (make_phantom(s, pose=FRAMED), 1.0, x))
+    ("clean", "-", True, lambda s: dict(ph=make_phantom(s, pose=FRAMED))),
+    *[("detected landmark noise sigma (mm)", f"{x:g}", x <= 2, lambda s, x=x: dict(ph=make_phantom(s, pose=FRAMED), sigma=x))
       for x in (1.0, 2.0, 5.0)],
-    ("user landmarks file, noise sigma (mm)", "2", True, lambda s: (make_phantom(s, pose=FRAMED), 1.0, 2.0, True)),
+    ("user landmarks file, noise sigma (mm)", "2", True, lambda s: dict(ph=make_phantom(s, pose=FRAMED), sigma=2.0, user=True)),
     *[("holes over the mask region", f"{100 * x:.0f} %", x <= 0.1,
-       lambda s, x=x: (with_holes(make_phantom(s, pose=FRAMED), REGION, x, s), 1.0, 0.0)) for x in (0.1, 0.3)],
+       lambda s, x=x: dict(ph=with_holes(make_phantom(s, pose=FRAMED), REGION, x, s))) for x in (0.1, 0.3)],
     *[("sensor noise sigma at 500 mm (mm)", f"{x:g}", x <= 0.5,
-       lambda s, x=x: (make_phantom(s, SensorModel(noise_mm_at_500=x), pose=FRAMED), 1.0, 0.0)) for x in (0.5, 1.0)],
+       lambda s, x=x: dict(ph=make_phantom(s, SensorModel(noise_mm_at_500=x), pose=FRAMED))) for x in (0.5, 1.0)],
     ("cheap camera (Kinect v1 model) at distance (mm)", "1000", False,
-     lambda s: (make_phantom(s, KINECT_V1, distance_mm=1000.0, pose=FRAMED), 1.0, 0.0)),
-    *[("yaw (deg)", f"{x:g}", x <= 20, lambda s, x=x: (make_phantom(s, yaw_deg=x, pose=FRAMED), 1.0, 0.0)) for x in (0.0, 20.0, 40.0)],
-    *[("scale error (depth_scale misstated)", f"x{x:g}", True, lambda s, x=x: (make_phantom(s, pose=FRAMED), x, 0.0))
+     lambda s: dict(ph=make_phantom(s, KINECT_V1, distance_mm=1000.0, pose=FRAMED))),
+    *[("yaw (deg)", f"{x:g}", x <= 20, lambda s, x=x: dict(ph=make_phantom(s, yaw_deg=x, pose=FRAMED))) for x in (0.0, 20.0, 40.0)],
+    *[("scale error (depth_scale misstated)", f"x{x:g}", True, lambda s, x=x: dict(ph=make_phantom(s, pose=FRAMED), scale=x))
       for x in (0.9, 1.1)],
+    *[("focal length misstated (fx, fy)", f"x{x:g}", False, lambda s, x=x: dict(ph=make_phantom(s, pose=FRAMED), focal=x))
+      for x in (1.15, 1.3, 1.5)],
     *[("colour image shifted sideways from its depth (px, ~mm)", f"{x}", False,
-       lambda s, x=x: (with_colour_shift(make_phantom(s, pose=FRAMED), x), 1.0, 0.0)) for x in (8, 16)],
-    ("any pose (yaw, pitch +-25 deg, roll +-15 deg, anywhere in view)", "-", False, lambda s: (make_phantom(s, pose=ANY_POSE), 1.0, 0.0)),
+       lambda s, x=x: dict(ph=with_colour_shift(make_phantom(s, pose=FRAMED), x))) for x in (8, 16)],
+    ("any pose (yaw, pitch +-25 deg, roll +-15 deg, anywhere in view)", "-", False, lambda s: dict(ph=make_phantom(s, pose=ANY_POSE))),
 ]
 
 
@@ -84,11 +91,14 @@ def noisy_detector(sigma: float, seed: int):
     return detect
 
 
-def run(seed: int, ph, scale: float, sigma: float, user: bool = False) -> dict:
-    """One design: outcome, mean mask-region error (mm) against the truth scaled as the scan is.
+def run(seed: int, ph, scale: float = 1.0, sigma: float = 0.0, user: bool = False, focal: float = 1.0) -> dict:
+    """One design: outcome, mean mask-region error (mm) against the truth as the scan shows it, and
+    the face's proportions. scale, focal: the depth scale and focal length stated that many times
+    too small / large (the face `scale` times too large; `focal` times too narrow and short);
     sigma: noise (mm) on the detected landmarks, or, with `user`, on a user's landmarks file."""
+    stated = replace(ph.intrinsics, fx=ph.intrinsics.fx * focal, fy=ph.intrinsics.fy * focal)
     with tempfile.TemporaryDirectory() as tmp:
-        write_files(Path(tmp), capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale / scale))
+        write_files(Path(tmp), capture_files(ph.image, ph.depth_raw, stated, ph.sensor.depth_scale / scale))
         scan = load_capture(Path(tmp))
     try:
         if user:
@@ -99,16 +109,18 @@ def run(seed: int, ph, scale: float, sigma: float, user: bool = False) -> dict:
                 d = design(scan, "nasal")
     except CpapfitError as exc:
         return {"outcome": "refused", "reason": f"{type(exc).__name__}: {str(exc).split(':')[0][:60]}", "message": str(exc)}
-    err = float(np.linalg.norm(d.registration.vertices[REGION] - scale * ph.surface[REGION], axis=1).mean())
+    seen = scale * ph.surface[REGION] * [1.0 / focal, 1.0 / focal, 1.0]  # camera frame: x and y scale with 1 / fx
+    err = float(np.linalg.norm(d.registration.vertices[REGION] - seen, axis=1).mean())
     flags = [g.code for g in d.quality.flags]
+    shape = {g.code: round(g.value, 3) for g in d.quality.gates if g.code in ("face_size", "depth_ratio")}
     return {"outcome": "made", "err": err, "flags": flags, "path": d.alignment.landmarks.path,
-            "spread": round(d.registration.landmark_spread_mm, 2)}
+            "spread": round(d.registration.landmark_spread_mm, 2), **shape}
 
 
 def one(job: tuple[int, int]) -> dict:
     """The design of condition number `c` on subject `seed` (in a worker process)."""
     c, seed = job
-    return run(seed, *CONDITIONS[c][3](seed))
+    return run(seed, **CONDITIONS[c][3](seed))
 
 
 def summary(rows: list[dict]) -> str:
