@@ -2,7 +2,7 @@
 each capture's triangles, or its points alone (`--cloud`), with per-vertex colour from its image
 or none, turned by `Rotation.random(seed)`, then `pipeline.design` for both masks. Prints the
 landmark path, the registration's mean error over the mask region against the subject's true
-surface, leak, safe window and rim gap, or the refusal.
+surface, leak, safe window, rim gap and the quality gates that flag it, or the refusal.
 
 Usage: .venv/bin/python bench/mesh_designs.py [--seeds 12] [--cloud]
 """
@@ -38,8 +38,8 @@ def main() -> None:
     args = ap.parse_args()
     region = mask_region(load_template())
     kind = "cloud" if args.cloud else "mesh"
-    print(f"| seed | {kind} | mask | outcome | error (mm) | leak (L/min) | window | rim gap max (mm) |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(f"| seed | {kind} | mask | outcome | error (mm) | leak (L/min) | window | rim gap max (mm) | flagged |")
+    print("|---|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(args.seeds):
             ph = make_phantom(seed)
@@ -55,12 +55,13 @@ def main() -> None:
                     try:
                         d = design(scan, mask)
                     except CpapfitError as exc:
-                        print(f"{row} refused: {exc} | | | | |", flush=True)
+                        print(f"{row} refused: {exc} | | | | | |", flush=True)
                         continue
                     fit = d.fits["custom"].summary()
                     error = np.linalg.norm(d.registration.vertices[region] - truth, axis=1).mean()
                     print(f"{row} designed ({d.alignment.landmarks.path}) | {error:.2f} | {fit['leak_l_min']:.2f} | "
-                          f"{fit['window_fraction']:.2f} | {d.rim.summary()['rim_gap_max_mm']:.2f} |", flush=True)
+                          f"{fit['window_fraction']:.2f} | {d.rim.summary()['rim_gap_max_mm']:.2f} | "
+                          f"{' '.join(g.code for g in d.quality.flags)} |", flush=True)
 
 
 if __name__ == "__main__":
