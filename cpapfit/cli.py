@@ -212,8 +212,9 @@ def load_user_landmarks(args, scan: Scan):
 
 
 def cmd_landmarks(args) -> int:
+    """The landmarks and similarity a design would use (detected ones far from the registered face dropped)."""
     scan = load_scan(Path(args.scan), args.units)
-    al = align(scan, load_user_landmarks(args, scan))
+    al, _ = registered(scan, align(scan, load_user_landmarks(args, scan)))
     fit = al.similarity
     record = landmarks_record(al.landmarks) | {
         "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),
