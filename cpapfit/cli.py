@@ -59,11 +59,16 @@ def template_summary() -> str:
     return f"{len(t.vertices)} vertices, {len(t.faces)} triangles; {bands}"
 
 
+def found_by(lm) -> str:
+    """How the landmarks were found, and what was rejected first, in words."""
+    return f"{len(lm.points)} landmarks by {lm.path}" + (f" ({lm.rejected})" if lm.rejected else "")
+
+
 def alignment_summaries(al: Alignment) -> dict[str, str]:
     """One line each for the landmarks and similarity stages."""
     lm, fit = al.landmarks, al.similarity
     return {
-        "landmarks": f"{len(lm.points)} landmarks by {lm.path} ({lm.note}{'; ' + lm.rejected if lm.rejected else ''})",
+        "landmarks": f"{found_by(lm)}: {lm.note}",
         "similarity": f"scale {fit.scale:.3f}, landmark RMS {fit.rms_mm:.1f} mm; face check: {al.check.describe()}",
     }
 
@@ -82,8 +87,7 @@ def cmd_register(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
     al, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
     write_bytes(Path(args.out), registration_ply(reg))
-    rejected = f" ({al.landmarks.rejected})" if al.landmarks.rejected else ""
-    info(f"{scan.units_note}; landmarks by {al.landmarks.path}{rejected}; {registration_summary(reg)} -> {args.out}")
+    info(f"{scan.units_note}; {found_by(al.landmarks)}; {registration_summary(reg)} -> {args.out}")
     return 0
 
 
@@ -225,7 +229,7 @@ def cmd_landmarks(args) -> int:
         "source": str(args.scan), "scan_units": scan.units,
     }
     write_bytes(Path(args.out), json_bytes(record))
-    info(f"{scan.units_note}; {len(al.landmarks.points)} landmarks by {al.landmarks.path} -> {args.out}")
+    info(f"{scan.units_note}; {found_by(al.landmarks)} -> {args.out}")
     return 0
 
 
