@@ -33,6 +33,7 @@ STAGES = (
     ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
 )
 STRAY_MM = QualityParams().detected_spread_refuse_mm  # detected landmarks this far (median) from the registered face: dropped
+DOUBT_MM = QualityParams().cross_check_spread_mm  # ... this far: cross-checked against the face's shape alone
 BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate", "report"}
 
 
@@ -94,6 +95,16 @@ def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registratio
     return alignment, register_template(scan, alignment)
 
 
+def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> np.ndarray | None:
+    """(n, 3) mm the template registered from the face's shape alone, when detected landmarks lie a
+    median over DOUBT_MM from their places on the registered face (and the shape alone places it);
+    else None."""
+    if alignment.landmarks.path not in ("image", "render") or not reg.landmark_spread_mm > DOUBT_MM:
+        return None
+    instead = landmark_free_alignment(scan, load_template(), "")
+    return None if instead is None else register_template(scan, Alignment(*instead)).vertices
+
+
 @dataclass(frozen=True)
 class Design:
     """A custom cushion for a scan: every stage's result, the printable solid and its checks."""
@@ -133,6 +144,7 @@ def design(
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
     al, reg = registered(scan, al)
+    by_shape = placed_by_shape(scan, al, reg)  # doubtful landmarks: where the shape alone puts the template
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
@@ -141,7 +153,7 @@ def design(
     edge = neutral.grid(256, 2)[:, 0]
     rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
     shape = proportions(load_template().vertices, al.similarity, reg)
-    quality = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape))  # or refuse: rescan
+    quality = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape))  # or refuse: rescan
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)

@@ -23,6 +23,11 @@ Measured once the template is registered and the seal carried over (all mm):
   detection rejected: its face failed the face check, or its landmarks lay far from the registered
   face). On synthetic subjects that is as good as landmarks; on the shared real face (fran) it put
   the seal curve 1.8-2.2 mm (at most 5.7 mm) from where the detected landmarks put it: always flagged;
+- shape apart: detected landmarks that lie further from their places than the detector's usual
+  error are doubtful; the template is then also placed by the face's shape alone and registered
+  (`pipeline.placed_by_shape`), and the two seal bands compared. Neither can be told right from
+  the geometry (a slide along the skin fits as well), so past the flag threshold the design is
+  flagged; never refused (on fran the shape alone is the one that errs);
 - face size and depth ratio (`proportions.py`): the registered face's size, and its depth for its
   breadth, against the template's (an adult's). A scale or units misstated makes the face, and the
   mask, that much too small or large; a focal length misstated by k makes it k times too deep for
@@ -62,6 +67,10 @@ class QualityParams:
     landmark_spread_*_mm: a user's landmarks' median distance along the face from their places on
         it, mm (bad above); flagged where the registration stops trusting them.
     detected_spread_*_mm: the same for detected landmarks, mm (bad above).
+    cross_check_spread_mm: detected landmarks with a spread above this (mm; the detector's own error
+        stays under 5.1 mm on captures) are cross-checked against the face's shape alone.
+    shape_apart_*_mm: mean distance (mm) between the seal bands the landmarks and the shape alone
+        place (bad above; never refused).
     rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
         median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
         it by construction (<= 0.6 mm), unless the template missed the face there.
@@ -86,6 +95,9 @@ class QualityParams:
     landmark_spread_refuse_mm: float = 10.0
     detected_spread_flag_mm: float = 7.0
     detected_spread_refuse_mm: float = 10.0
+    cross_check_spread_mm: float = 5.0
+    shape_apart_flag_mm: float = 2.0
+    shape_apart_refuse_mm: float = np.inf
     rim_gap_flag_mm: float = 1.0
     rim_gap_refuse_mm: float = 3.0
     small_face_flag: float = 0.8
@@ -140,10 +152,8 @@ def _gate(code: str, value: float, limits: tuple[float, float], what: str, advic
     side = "below" if low_is_bad else "above"
     worse = (lambda a, b: a < b) if low_is_bad else (lambda a, b: a > b)
     scale = 100.0 if unit == " %" else 1.0
-    return Gate(
-        code, float(value), worse(value, flag_at), worse(value, refuse_at),
-        f"{what}; {advice} (rescan advised {side} {scale * flag_at:g}{unit}, refused {side} {scale * refuse_at:g}{unit})",
-    )
+    refused = f"refused {side} {scale * refuse_at:g}{unit}" if np.isfinite(refuse_at) else "never refused"
+    return Gate(code, float(value), worse(value, flag_at), worse(value, refuse_at), f"{what}; {advice} (rescan advised {side} {scale * flag_at:g}{unit}, {refused})")
 
 
 def longest_run(bad: np.ndarray) -> int:
@@ -156,9 +166,10 @@ def longest_run(bad: np.ndarray) -> int:
 
 
 def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact: Contact, rim: RimGap,
-           shape: Proportions, params: QualityParams = QualityParams()) -> Quality:
+           shape: Proportions, by_shape: np.ndarray | None = None, params: QualityParams = QualityParams()) -> Quality:
     """The gates for the landmarks, the registration and the face's `shape` it gives, the seal it
-    carried onto `scan` and the rim of the cushion designed on it."""
+    carried onto `scan` and the rim of the cushion designed on it; `by_shape`: the (n, 3) mm template
+    registered from the face's shape alone, to compare (doubtful detected landmarks), or None."""
     p, mask = params, contact.mask
     tree = cKDTree(scan.vertices)
     reach = max(p.near_mm, SPACINGS * spacing(tree))
@@ -189,6 +200,12 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
                            "they disagree with the geometry: check the landmarks file, or rescan"))
         if np.isfinite(registration.landmark_spread_mm):
             gates.append(_spread_gate(scan, landmarks.path, registration.landmark_spread_mm, p))
+        if by_shape is not None:
+            apart = float(np.linalg.norm(registration.vertices[band] - by_shape[band], axis=1).mean())
+            gates.append(_gate("shape_apart_mm", apart, (p.shape_apart_flag_mm, p.shape_apart_refuse_mm),
+                               f"the {mask} seal region the {landmarks.path} landmarks placed lies a mean {apart:.1f} mm from where "
+                               "the face's shape alone places it, and the geometry cannot tell which is right",
+                               f"check the landmarks picture ({_image_cause(scan)}), or give landmarks with --landmarks"))
     else:
         why, cause = (landmarks.rejected, _image_cause(scan)) if landmarks.rejected else ("no face was detected", _no_face_cause(scan))
         gates.append(Gate("landmark_free", 1.0, True, False, f"{why}, so the template was placed by the face's shape alone, which on a "

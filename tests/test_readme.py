@@ -17,6 +17,7 @@ ROWS = {
     ("landmark_spread_mm", "a landmarks file"): ("landmark_spread_flag_mm", "landmark_spread_refuse_mm"),
     ("landmark_spread_mm", "detected landmarks"): ("detected_spread_flag_mm", "detected_spread_refuse_mm"),
     ("rim_gap_mm", ""): ("rim_gap_flag_mm", "rim_gap_refuse_mm"),
+    ("shape_apart_mm", ""): ("shape_apart_flag_mm", "shape_apart_refuse_mm"),
     ("face_size", "smaller"): ("small_face_flag", "small_face_refuse"),
     ("face_size", "larger"): ("large_face_flag", "large_face_refuse"),
     ("depth_ratio", "flatter"): ("flat_face_flag", "flat_face_refuse"),
@@ -35,10 +36,17 @@ def gate_rows() -> list[tuple[str, str, float, float]]:
     """(code, measure, flagged at, refused at) of each thresholded row (% as fractions)."""
     rows = []
     for code, measure, flag, refuse in table():
-        m = [re.fullmatch(r"[<>] ([\d.]+) (%|mm)", cell) for cell in (flag, refuse)]
         if code not in ALWAYS_FLAGGED:
-            rows.append((code, measure, *(float(x.group(1)) * (0.01 if x.group(2) == "%" else 1.0) for x in m)))
+            rows.append((code, measure, *map(threshold, (flag, refuse))))
     return rows
+
+
+def threshold(cell: str) -> float:
+    """A table cell's threshold: "> 2 mm" is 2, "< 75 %" 0.75, "never" infinite."""
+    if cell == "never":
+        return float("inf")
+    m = re.fullmatch(r"[<>] ([\d.]+) (%|mm)", cell)
+    return float(m.group(1)) * (0.01 if m.group(2) == "%" else 1.0)
 
 
 def row_key(code: str, measure: str) -> tuple[str, str]:
