@@ -15,6 +15,7 @@ from . import __version__
 from .errors import CpapfitError, InputError
 from .evaluate.fit import FitParams
 from .io import load_scan
+from .landmarks.types import Landmarks
 from .io.cushion import load_cushion
 from .io.landmarks import landmarks_record
 from .io.design import evaluation_record, registration_ply
@@ -59,7 +60,7 @@ def template_summary() -> str:
     return f"{len(t.vertices)} vertices, {len(t.faces)} triangles; {bands}"
 
 
-def found_by(lm) -> str:
+def found_by(lm: Landmarks) -> str:
     """How the landmarks were found, and what was rejected first, in words."""
     return f"{len(lm.points)} landmarks by {lm.path}" + (f" ({lm.rejected})" if lm.rejected else "")
 

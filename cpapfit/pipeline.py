@@ -88,21 +88,27 @@ def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registratio
     if lm.path == "user" or not reg.landmark_spread_mm > STRAY_MM:
         return alignment, reg
     why = f"the landmarks found by {lm.path} lay a median {reg.landmark_spread_mm:.1f} mm from their places on the registered face"
-    instead = landmark_free_alignment(scan, load_template(), "; ".join(filter(None, (lm.rejected, why))))
-    if instead is None:
-        return alignment, reg
-    alignment = Alignment(*instead)
-    return alignment, register_template(scan, alignment)
+    return _by_shape(scan, "; ".join(filter(None, (lm.rejected, why)))) or (alignment, reg)
 
 
 def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> np.ndarray | None:
     """(n, 3) mm the template registered from the face's shape alone, when detected landmarks lie a
-    median over DOUBT_MM from their places on the registered face (and the shape alone places it);
-    else None."""
-    if alignment.landmarks.path not in ("image", "render") or not reg.landmark_spread_mm > DOUBT_MM:
+    median over DOUBT_MM (and at most STRAY_MM: else `registered` has tried it) from their places on
+    the registered face, and the shape alone places it; else None."""
+    if alignment.landmarks.path not in ("image", "render") or not DOUBT_MM < reg.landmark_spread_mm <= STRAY_MM:
         return None
-    instead = landmark_free_alignment(scan, load_template(), "")
-    return None if instead is None else register_template(scan, Alignment(*instead)).vertices
+    by_shape = _by_shape(scan, "")
+    return None if by_shape is None else by_shape[1].vertices
+
+
+def _by_shape(scan: Scan, rejected: str) -> tuple[Alignment, Registration] | None:
+    """The landmark-free alignment (saying what was `rejected` for it) and its registration, or None
+    if it fails the face check."""
+    instead = landmark_free_alignment(scan, load_template(), rejected)
+    if instead is None:
+        return None
+    alignment = Alignment(*instead)
+    return alignment, register_template(scan, alignment)
 
 
 @dataclass(frozen=True)

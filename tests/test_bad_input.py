@@ -197,7 +197,7 @@ def _(d, s):
     return [d], ["depth_scale"]
 
 
-@case("intrinsics of a camera with twice the resolution")
+@case("intrinsics with a focal length twice too long")
 def _(d, s):
     folder = capture(d, s)
     k = json.loads((folder / "intrinsics.json").read_text())["intrinsic_matrix"]

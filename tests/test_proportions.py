@@ -1,4 +1,7 @@
-"""The registered face's proportions: a known stretch of the template, in any pose, is read back."""
+"""The registered face's proportions: a known stretch of the template, in any pose, is read back;
+the gates on them; which landmarks are cross-checked against the face's shape alone."""
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -6,7 +9,9 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.align.nonrigid import Registration
 from cpapfit.align.similarity import Similarity
-from cpapfit.proportions import MIN_MATCHED, proportions
+from cpapfit.pipeline import placed_by_shape
+from cpapfit.proportions import MIN_MATCHED, Proportions, proportions
+from cpapfit.quality import QualityParams, _shape_gates
 from cpapfit.template import load_template
 
 
@@ -39,3 +44,46 @@ def test_too_little_matched_tells_nothing():
     similarity, registration = posed(np.ones(3), 1.0, np.arange(n) < MIN_MATCHED - 1)
     shape = proportions(load_template().vertices, similarity, registration)
     assert np.isnan(shape.size) and np.isnan(shape.depth_ratio)
+
+
+CAPTURE, MESH = SimpleNamespace(is_capture=True), SimpleNamespace(is_capture=False)
+
+
+@pytest.mark.parametrize("size,ratio,flagged,refused", [
+    (1.0, 1.0, set(), set()),
+    (0.75, 1.0, {"face_size"}, set()),
+    (0.6, 1.0, {"face_size"}, {"face_size"}),
+    (1.3, 1.0, {"face_size"}, set()),
+    (1.0, 0.8, {"depth_ratio"}, set()),
+    (1.0, 1.35, {"depth_ratio"}, {"depth_ratio"}),
+])
+def test_the_shape_gates_judge_each_side(size, ratio, flagged, refused):
+    gates = _shape_gates(CAPTURE, Proportions(size, ratio), QualityParams())
+    assert [g.code for g in gates] == ["depth_ratio", "face_size"]
+    assert {g.code for g in gates if g.flag} == flagged and {g.code for g in gates if g.refuse} == refused
+
+
+def test_the_shape_gates_say_what_to_check():
+    """A capture: which way the focal length is off, and a child's face as the other cause of a small
+    one; a mesh: its units, and a stretch (a mesh has no focal length to check)."""
+    flat, deep = (_shape_gates(CAPTURE, Proportions(0.7, r), QualityParams())[0].message for r in (0.8, 1.25))
+    assert "too short makes the face k times too flat and the mask k times too wide" in flat
+    assert "too long makes the face k times too deep and the mask k times too narrow" in deep
+    small = _shape_gates(CAPTURE, Proportions(0.75, 1.0), QualityParams())[1].message
+    assert "depth scale and intrinsics" in small and "a child's face" in small
+    ratio, size = (g.message for g in _shape_gates(MESH, Proportions(1.3, 1.25), QualityParams()))
+    assert "stretched or squashed" in ratio and "focal" not in ratio and "--units" in size and "child" not in size
+
+
+def test_a_size_without_a_depth_ratio_is_still_judged():
+    """A map with no breadth (a degenerate registration): size 0, refused; no depth ratio to judge."""
+    gates = _shape_gates(CAPTURE, Proportions(0.0, np.nan), QualityParams())
+    assert [(g.code, g.refuse) for g in gates] == [("face_size", True)]
+
+
+@pytest.mark.parametrize("path,spread", [("user", 7.0), ("fallback", np.nan), ("image", 4.9), ("render", 10.5)])
+def test_only_doubtful_detected_landmarks_are_cross_checked(path, spread):
+    """Not a user's file or the fallback; detected landmarks only past 5 mm of spread, and not past
+    10 mm (`registered` has then tried the shape alone already)."""
+    alignment = SimpleNamespace(landmarks=SimpleNamespace(path=path))
+    assert placed_by_shape(None, alignment, SimpleNamespace(landmark_spread_mm=spread)) is None

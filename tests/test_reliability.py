@@ -136,13 +136,13 @@ def test_a_misstated_focal_length_is_flagged(tmp_path, phantom1, twice):
 
 
 def test_a_misstated_depth_scale_is_flagged(tmp_path, phantom1):
-    """A depth scale 1.4 times too large: the whole face, and the mask, 1.4 times too small
+    """A depth scale 1.35 times too large: the whole face, and the mask, 1.35 times too small
     (in proportion: the shape alone cannot tell), smaller than adults' faces are: flagged."""
-    stated = dataclasses.replace(phantom1, sensor=dataclasses.replace(phantom1.sensor, depth_scale=phantom1.sensor.depth_scale * 1.4))
+    stated = dataclasses.replace(phantom1, sensor=dataclasses.replace(phantom1.sensor, depth_scale=phantom1.sensor.depth_scale * 1.35))
     codes, err = design_flags(tmp_path, stated)
     assert codes == ["face_size"] and "check the capture's depth scale" in err, err
     q = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
-    assert q["face_size"] == pytest.approx(phantom1.identity["scale"] * np.sqrt(phantom1.identity["face_width"] * phantom1.identity["face_height"]) / 1.4, abs=0.03)
+    assert q["face_size"] == pytest.approx(phantom1.identity["scale"] * np.sqrt(phantom1.identity["face_width"] * phantom1.identity["face_height"]) / 1.35, abs=0.03)
 
 
 def test_holes_under_the_seal_are_flagged(tmp_path, phantom1):
