@@ -15,7 +15,6 @@ from . import __version__
 from .errors import CpapfitError, InputError
 from .evaluate.fit import FitParams
 from .io import load_scan
-from .landmarks.types import Landmarks
 from .io.cushion import load_cushion
 from .io.landmarks import landmarks_record
 from .io.design import evaluation_record, registration_ply
@@ -23,6 +22,7 @@ from .io.phantom import write_phantom
 from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import design_job, user_landmarks
+from .landmarks.types import Landmarks
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
 from .pipeline import Alignment, align, evaluate, face_for, missing_stages, registered, stage_table

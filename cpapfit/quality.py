@@ -156,7 +156,8 @@ def _gate(code: str, value: float, limits: tuple[float, float], what: str, advic
     worse = (lambda a, b: a < b) if low_is_bad else (lambda a, b: a > b)
     scale = 100.0 if unit == " %" else 1.0
     refused = f"refused {side} {scale * refuse_at:g}{unit}" if np.isfinite(refuse_at) else "never refused"
-    return Gate(code, float(value), worse(value, flag_at), worse(value, refuse_at), f"{what}; {advice} (rescan advised {side} {scale * flag_at:g}{unit}, {refused})")
+    message = f"{what}; {advice} (rescan advised {side} {scale * flag_at:g}{unit}, {refused})"
+    return Gate(code, float(value), worse(value, flag_at), worse(value, refuse_at), message)
 
 
 def longest_run(bad: np.ndarray) -> int:

@@ -142,7 +142,8 @@ def test_a_misstated_depth_scale_is_flagged(tmp_path, phantom1):
     codes, err = design_flags(tmp_path, stated)
     assert codes == ["face_size"] and "check the capture's depth scale" in err, err
     q = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
-    assert q["face_size"] == pytest.approx(phantom1.identity["scale"] * np.sqrt(phantom1.identity["face_width"] * phantom1.identity["face_height"]) / 1.35, abs=0.03)
+    p = phantom1.identity
+    assert q["face_size"] == pytest.approx(p["scale"] * np.sqrt(p["face_width"] * p["face_height"]) / 1.35, abs=0.03)
 
 
 def test_holes_under_the_seal_are_flagged(tmp_path, phantom1):
