@@ -87,7 +87,7 @@ def noisy_detector(sigma: float, seed: int):
         lm = found.landmarks
         points = on_skin(scan, lm.points, sigma, seed)
         fit = fit_similarity(template.vertices[lm.template_index], points)
-        return Detection(Landmarks(points, lm.template_index, fit.weights, lm.path, lm.note), fit, found.inliers)
+        return Detection(replace(lm, points=points, confidence=fit.weights), fit, found.inliers)
     return detect
 
 

@@ -1,7 +1,7 @@
 """Synthetic subjects with ground truth: a face that is not the template, seen by a depth camera.
 
 `make_phantom(seed)` changes the template's identity smoothly (nose, cheeks, face size, chin and
-low-frequency bumps), poses the head in front of a virtual 640x480 depth camera at 350-700 mm,
+low-frequency bumps), opens the mouth if asked (`open_mouth`), poses the head in front of a virtual 640x480 depth camera at 350-700 mm,
 and renders a shaded colour image and a depth image with realistic sensor effects. The truth is
 the subject's surface in the template's vertex order, in the camera frame (mm), so the true
 position of every template vertex (landmarks, contact regions) is known.
@@ -97,19 +97,23 @@ class Phantom:
 
 def make_phantom(
     seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None,
-    pose: PoseRange = ANY_POSE,
+    pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0,
 ) -> Phantom:
     """The synthetic subject of `seed`: same seed, same arrays, bit for bit. `yaw_deg` turns the
     head by that yaw, `distance_mm` sets it that far from the camera, instead of the random ones;
-    `pose` bounds the random pose (everything else as for the seed: the same face whatever the pose)."""
+    `pose` bounds the random pose (everything else as for the seed: the same face whatever the pose);
+    `mouth_open_mm` > 0 drops the jaw: the lower inner lip moves that far (`open_mouth`)."""
     rng = np.random.default_rng(seed)
     template = load_template()
     identity = random_identity(rng)
-    face = apply_identity(template, identity)
+    face, mouth = apply_identity(template, identity), np.zeros(len(template.vertices), dtype=bool)
+    if mouth_open_mm > 0:
+        face, mouth = open_mouth(face, template, mouth_open_mm)
+        identity = {**identity, "mouth_open_mm": float(mouth_open_mm)}
     intrinsics = random_intrinsics(rng)
     surface, placed = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm, pose)
     hits = raycast(surface, template.faces, intrinsics)
-    image = colour_image(hits, surface, template, rng)
+    image = colour_image(hits, surface, template, rng, mouth)
     depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
     return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, placed)
 
@@ -150,6 +154,50 @@ def apply_identity(template: Template, p: dict) -> np.ndarray:
     centre = lm[168]
     scale = p["scale"] * np.array([p["face_width"], p["face_height"], 1.0])
     return (v - centre) * scale + centre
+
+
+# Face Mesh's inner-lip contours, mouth corner to mouth corner.
+UPPER_INNER_LIP = [78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308]
+LOWER_INNER_LIP = [78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308]
+JAW_HINGE_MM = (25.0, -85.0)  # the jaw's hinge from the upper inner lip (template frame): up, forward
+CAVITY_MM = 20.0  # how far behind the lips an open mouth's inside lies
+MOUTH_INSIDE = np.array([0.12, 0.04, 0.04])  # its albedo
+
+
+def open_mouth(face: np.ndarray, template: Template, gap_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 3) mm vertices, (N,) bool inside the mouth) of `face` (template frame) with the jaw
+    turned about its hinge so the lower inner lip moves `gap_mm` (the lips part ~3/4 of that, as
+    it also moves back). The lower face turns wholly below
+    the mouth, the cheeks beside it partly (blended over 25 mm); the template's skin across the
+    mouth is set back CAVITY_MM into the head, the dark inside of the mouth a depth camera sees."""
+    lm = template.landmarks
+    inside = _inside_mouth(template)
+    face = face - CAVITY_MM * inside[:, None] * [0.0, 0.0, 1.0]
+    hinge = np.array([0.0, lm[13, 1] + JAW_HINGE_MM[0], lm[13, 2] + JAW_HINGE_MM[1]])
+    angle = gap_mm / np.linalg.norm(lm[14] - hinge)
+    turn = Rotation.from_rotvec(np.outer(angle * _jaw_weight(template), [1.0, 0.0, 0.0])).as_matrix()
+    return np.einsum("nij,nj->ni", turn, face - hinge) + hinge, inside
+
+
+def _jaw_weight(template: Template) -> np.ndarray:
+    """(N,) how much of the jaw's turn each template vertex takes: 1 below the mouth, 0 above it,
+    blended ever more gently beside and beyond the mouth corners."""
+    lm, v = template.landmarks, template.vertices
+    upper, lower = lm[UPPER_INNER_LIP[5:]], lm[LOWER_INNER_LIP[5:]]  # the mouth's right half, centre to corner
+    corner = lm[UPPER_INNER_LIP[-1], 0]
+    x = np.minimum(np.abs(v[:, 0]), corner)
+    line = 0.5 * (np.interp(x, upper[:, 0], upper[:, 1]) + np.interp(x, lower[:, 0], lower[:, 1]))
+    width = 0.3 + 25.0 * np.clip((np.abs(v[:, 0]) - corner) / 30.0, 0.0, 1.0)
+    t = np.clip((line - v[:, 1]) / width + 0.5, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _inside_mouth(template: Template) -> np.ndarray:
+    """(N,) bool: template vertices over 0.3 mm inside the inner-lip contour (frontal x, y)."""
+    lm, v = template.landmarks, template.vertices
+    mouth = Polygon(np.vstack([lm[UPPER_INNER_LIP, :2], lm[LOWER_INNER_LIP[::-1], :2]]))
+    inside = mouth.contains_points(v[:, :2], radius=0.3) & mouth.contains_points(v[:, :2], radius=-0.3)  # either winding
+    return inside & (v[:, 2] > lm[13, 2] - 15.0)  # not the back of the head
 
 
 def random_intrinsics(rng: np.random.Generator) -> Intrinsics:
@@ -220,11 +268,14 @@ def _near_edges(template: Template, feature: str, radius: float) -> np.ndarray:
     return (np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=-1) < radius).any(axis=1)
 
 
-def colour_image(hits: Hits, surface: np.ndarray, template: Template, rng: np.random.Generator) -> np.ndarray:
-    """(H, W, 3) uint8 shaded colour image with a random light and mild sensor noise."""
+def colour_image(hits: Hits, surface: np.ndarray, template: Template, rng: np.random.Generator, mouth: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 shaded colour image with a random light and mild sensor noise; the (N,) bool
+    `mouth` vertices are the dark inside of an open mouth."""
     light = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.6, 0.1), -1.0])
     background = rng.uniform(0.35, 0.75) * np.array([1.0, 1.02, 1.06])
-    image = shade(hits, surface, template.faces, skin_albedo(template, rng), light=light, background=background)
+    albedo = skin_albedo(template, rng)
+    albedo[mouth] = MOUTH_INSIDE
+    image = shade(hits, surface, template.faces, albedo, light=light, background=background)
     noisy = image.astype(np.float64) + rng.normal(0.0, 2.0, image.shape)
     return np.clip(np.round(noisy), 0, 255).astype(np.uint8)
 

@@ -32,7 +32,11 @@ Measured once the template is registered and the seal carried over (all mm):
   breadth, against the template's (an adult's). A scale or units misstated makes the face, and the
   mask, that much too small or large; a focal length misstated by k makes it k times too deep for
   its breadth. Adult faces lie well inside the flag thresholds, so a face past them is more likely
-  a misstated scan than a face, and it is said which setting to check.
+  a misstated scan than a face, and it is said which setting to check;
+- lips apart (oronasal masks): how far apart the detected inner lips are (`landmarks/mouth.py`).
+  The template's mouth is closed and does not follow a dropped jaw: on framed synthetic subjects
+  whose lower lip moved 4 mm the oronasal seal region lands 0.9-2.7 mm off its place (closed:
+  0.3-0.9), 8 mm 2.2-3.4 mm, with every other gate clean. Nasal masks are not affected.
 
 Each gate flags "rescan advised" past its flag threshold and refuses the design past its refuse
 threshold (`QualityParams`, calibrated on synthetic subjects: see bench/RESULTS.md).
@@ -79,6 +83,8 @@ class QualityParams:
         below / above).
     flat_face_* / deep_face_*: its depth for its breadth against the template's
         (`Proportions.depth_ratio`, bad below / above).
+    lips_apart_*_mm: the detected inner lips' distance, mm (bad above; oronasal masks only): closed
+        mouths read 0.6-1.4 mm on synthetic subjects and 0.7-1.2 mm on the shared real scans.
     Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
     flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin. The
     face's proportions, over 959 synthetic designs with nothing misstated: size 0.83-1.16, depth
@@ -111,6 +117,8 @@ class QualityParams:
     flat_face_refuse: float = 0.77
     deep_face_flag: float = 1.18
     deep_face_refuse: float = 1.3
+    lips_apart_flag_mm: float = 6.0
+    lips_apart_refuse_mm: float = 11.0
 
 
 @dataclass(frozen=True)
@@ -215,7 +223,18 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         gates.append(Gate("landmark_free", 1.0, True, False, f"{why}, so the template was placed by the face's shape alone, which on a "
                           f"real face can put the seal a few mm from where landmarks put it; check the landmarks picture ({cause}), "
                           "or give landmarks with --landmarks"))
-    return Quality(tuple(gates + _shape_gates(scan, shape, p)))
+    return Quality(tuple(gates + _shape_gates(scan, shape, p) + _mouth_gates(mask, landmarks, p)))
+
+
+def _mouth_gates(mask: str, landmarks: Landmarks, p: QualityParams) -> list[Gate]:
+    """How far apart the lips are, for an oronasal mask whose landmarks say so (none otherwise)."""
+    lips = landmarks.lips_apart_mm
+    if mask != "oronasal" or not np.isfinite(lips):
+        return []
+    return [_gate("lips_apart_mm", lips, (p.lips_apart_flag_mm, p.lips_apart_refuse_mm),
+                  f"the lips are {lips:.0f} mm apart: the mouth is open, and the template's closed mouth does not follow the "
+                  "dropped jaw, so the seal's chin part lies off its place",
+                  "rescan with the lips closed and the jaw relaxed (a nasal mask is not affected)")]
 
 
 def _shape_gates(scan: Scan, shape: Proportions, p: QualityParams) -> list[Gate]:

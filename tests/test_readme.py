@@ -22,6 +22,7 @@ ROWS = {
     ("face_size", "larger"): ("large_face_flag", "large_face_refuse"),
     ("depth_ratio", "flatter"): ("flat_face_flag", "flat_face_refuse"),
     ("depth_ratio", "deeper"): ("deep_face_flag", "deep_face_refuse"),
+    ("lips_apart_mm", ""): ("lips_apart_flag_mm", "lips_apart_refuse_mm"),
 }
 ALWAYS_FLAGGED = ("landmark_free",)  # no threshold: flagged whenever it happens, never refused
 

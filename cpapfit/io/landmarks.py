@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..landmarks.mouth import lips_apart_in_points
 from ..landmarks.types import Landmarks
 from .units import MM_PER_UNIT
 
@@ -39,13 +40,16 @@ def read_landmarks(path: Path, units: str, n_template: int) -> Landmarks:
         raise InputError(f"{path}: a template_index appears twice")
     if len(index) < MIN_LANDMARKS:
         raise InputError(f"{path}: {len(index)} landmarks; at least {MIN_LANDMARKS} are needed to place the template")
-    return Landmarks(points * MM_PER_UNIT[units], index, np.ones(len(index)), "user", f"user landmarks from {path.name}")
+    points = points * MM_PER_UNIT[units]
+    return Landmarks(points, index, np.ones(len(index)), "user", f"user landmarks from {path.name}",
+                     lips_apart_mm=lips_apart_in_points(points, index))
 
 
 def landmarks_record(lm: Landmarks) -> dict:
     """The JSON record of landmarks (mm, scan frame)."""
     return {
         "units": "mm", "path": lm.path, "note": lm.note, "rejected": lm.rejected,
+        "lips_apart_mm": round(lm.lips_apart_mm, 2) if np.isfinite(lm.lips_apart_mm) else None,
         "points": np.round(lm.points, 4).tolist(),
         "template_index": lm.template_index.tolist(),
         "confidence": np.round(lm.confidence, 4).tolist(),

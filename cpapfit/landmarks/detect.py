@@ -9,7 +9,7 @@ a detection there replaces it (an axis view of a scan in an arbitrary orientatio
 obliquely, and MediaPipe's landmarks on an oblique face are off by millimetres).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -21,6 +21,7 @@ from ..scan import Intrinsics, Scan
 from ..template import N_LANDMARKS, Template
 from .facemesh import detect_rotations
 from .lift import lift
+from .mouth import lips_apart_mm
 from .types import Landmarks
 from .views import axis_views, face_view, render_view
 
@@ -88,8 +89,7 @@ def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detec
 
 def _as_found_by(det: Detection, path: str) -> Detection:
     """The detection with its landmarks labelled as found by `path` ("image" or "render")."""
-    lm = det.landmarks
-    return Detection(Landmarks(lm.points, lm.template_index, lm.confidence, path, lm.note), det.similarity, det.inliers)
+    return Detection(replace(det.landmarks, path=path), det.similarity, det.inliers)
 
 
 def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True) -> Detection | None:
@@ -141,4 +141,5 @@ def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndar
     rotation = basis.T @ fit.rotation
     scan_fit = Similarity(fit.scale, rotation, basis.T @ fit.translation + origin, fit.weights, fit.rms_mm, fit.iterations)
     note = f"{note}; {len(index)} landmarks lifted and facing the camera, {inliers} agree with the template"
-    return Detection(Landmarks(points, index.astype(np.int64), fit.weights, "image", note), scan_fit, inliers)
+    lips = lips_apart_mm(uv, fit, template.landmarks, sight.intrinsics)
+    return Detection(Landmarks(points, index.astype(np.int64), fit.weights, "image", note, lips_apart_mm=lips), scan_fit, inliers)

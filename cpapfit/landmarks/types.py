@@ -23,6 +23,8 @@ class Landmarks:
     note: one line on how they were found (view, rotation, counts).
     rejected: what was found and rejected before them, in words (a detected face that failed the
         face check, or detected landmarks that lay far from the registered face); "" if nothing was.
+    lips_apart_mm: how far apart the inner lips (landmarks 13, 14) are, mm (`mouth.py`); NaN
+        where that is not known (the fallback, a landmarks file without both).
     """
 
     points: np.ndarray
@@ -31,6 +33,7 @@ class Landmarks:
     path: str
     note: str = ""
     rejected: str = ""
+    lips_apart_mm: float = float("nan")
 
     def __post_init__(self):
         freeze_arrays(self)

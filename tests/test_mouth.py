@@ -1,0 +1,100 @@
+"""An open mouth: the phantom's dropped jaw, the lips' opening read off the detected landmarks,
+and the gate that keeps an oronasal cushion from being made for a jaw the template cannot follow."""
+
+import json
+
+import numpy as np
+import pytest
+
+from cpapfit.errors import QualityError
+from cpapfit.io.capture import load_capture
+from cpapfit.io.landmarks import landmarks_record, read_landmarks
+from cpapfit.io.phantom import write_phantom
+from cpapfit.landmarks.types import Landmarks
+from cpapfit.phantom import FRAMED, make_phantom
+from cpapfit.pipeline import align, design
+from cpapfit.quality import QualityParams, _mouth_gates
+from cpapfit.template import load_template
+
+SEED = 101
+OPEN_MM = 14.0  # well past the refusal (11 mm): the lips read 18 mm apart
+
+
+def in_template_frame(ph) -> np.ndarray:
+    """(N, 3) mm: the phantom's surface taken back out of its pose (the face before it was placed)."""
+    pose = ph.pose
+    return (ph.surface - pose["translation_mm"]) @ np.array(pose["rotation"]) + pose["template_centre_mm"]
+
+
+def lips(surface: np.ndarray) -> float:
+    """mm between the inner lips (landmarks 13, 14) of a (N, 3) surface."""
+    return float(np.linalg.norm(surface[13] - surface[14]))
+
+
+@pytest.fixture(scope="module")
+def closed_and_open(tmp_path_factory):
+    """Subject SEED, framed, with its mouth closed and opened (lower lip moved OPEN_MM): (phantom, capture scan) each."""
+    out = []
+    for mm in (0.0, OPEN_MM):
+        ph = make_phantom(SEED, pose=FRAMED, mouth_open_mm=mm)
+        folder = tmp_path_factory.mktemp(f"mouth{mm:g}")
+        write_phantom(ph, folder)
+        out.append((ph, load_capture(folder)))
+    return out
+
+
+def test_the_jaw_drops_below_the_mouth_and_nothing_moves_above_it(closed_and_open):
+    (closed, _), (opened, _) = closed_and_open
+    moved = np.linalg.norm(in_template_frame(opened) - in_template_frame(closed), axis=1)
+    assert moved[14] == pytest.approx(OPEN_MM, rel=0.12)  # the lower lip (the face is scaled 0.9-1.1 after)
+    assert lips(opened.surface) - lips(closed.surface) > 6.0
+    t = load_template()
+    above = t.vertices[:, 1] > t.landmarks[13, 1] + 20.0  # the nose and everything above it
+    assert moved[above].max() < 1e-6
+    assert moved[152] > 10.0  # the chin, further from the hinge than the lip
+    assert np.isin(t.regions["oronasal"].band, np.flatnonzero(moved > 2.0)).any()
+
+
+def test_the_detected_lips_measure_the_opening(closed_and_open):
+    """MediaPipe's inner lips, taken to the depth of the fitted template's: a closed mouth reads
+    under 3 mm (the shared real scans 0.7-1.2; the template's own lips, 4.8 mm apart, look closed),
+    and opening it adds the opening, or up to 4 mm more (a wide mouth is over-read: the safe side)."""
+    (closed, closed_scan), (opened, open_scan) = closed_and_open
+    before, after = (align(scan).landmarks.lips_apart_mm for scan in (closed_scan, open_scan))
+    assert before < 3.0
+    assert -1.0 < (after - before) - (lips(opened.surface) - lips(closed.surface)) < 4.0  # mm
+
+
+def test_an_open_mouth_refuses_the_oronasal_cushion_and_not_the_nasal(closed_and_open):
+    _, (opened, scan) = closed_and_open
+    with pytest.raises(QualityError, match="lips_apart_mm.*the mouth is open.*lips closed"):
+        design(scan, "oronasal")
+    nasal = design(scan, "nasal")
+    assert "lips_apart_mm" not in {g.code for g in nasal.quality.gates}
+    band = load_template().regions["nasal"].band
+    assert np.linalg.norm(nasal.registration.vertices[band] - opened.surface[band], axis=1).mean() < 1.0  # mm
+
+
+@pytest.mark.parametrize("mm, mask, expected", [
+    (3.0, "oronasal", (False, False)), (9.0, "oronasal", (True, False)), (13.0, "oronasal", (True, True)),
+    (13.0, "nasal", None), (np.nan, "oronasal", None),
+])
+def test_the_lips_gate_flags_then_refuses_oronasal_masks_only(mm, mask, expected):
+    p = QualityParams()
+    assert p.lips_apart_flag_mm < 9.0 < p.lips_apart_refuse_mm < 13.0
+    landmarks = Landmarks(np.zeros((1, 3)), np.zeros(1, np.int64), np.ones(1), "image", lips_apart_mm=mm)
+    gates = _mouth_gates(mask, landmarks, p)
+    assert [(g.flag, g.refuse) for g in gates] == ([] if expected is None else [expected])
+
+
+def test_a_landmarks_file_with_both_inner_lips_says_how_far_apart_they_are(tmp_path):
+    t = load_template()
+    index = [1, 4, 6, 13, 14, 152]
+    points = t.vertices[index] / 1000.0 + [0.0, 0.0, 0.5]  # in metres
+    (tmp_path / "lm.json").write_text(json.dumps({"points": points.tolist(), "template_index": index}))
+    read = read_landmarks(tmp_path / "lm.json", "m", len(t.vertices))
+    assert read.lips_apart_mm == pytest.approx(lips(t.vertices), abs=1e-9)
+    assert landmarks_record(read)["lips_apart_mm"] == pytest.approx(lips(t.vertices), abs=0.01)
+    (tmp_path / "few.json").write_text(json.dumps({"points": points[:4].tolist(), "template_index": index[:4]}))
+    without = read_landmarks(tmp_path / "few.json", "m", len(t.vertices))
+    assert np.isnan(without.lips_apart_mm) and landmarks_record(without)["lips_apart_mm"] is None
