@@ -1,9 +1,10 @@
 """An open mouth (issue 9's "open mouths"): framed synthetic subjects with the jaw dropped, designed
 end to end with the oronasal mask. Printed per subject and opening: the mean error of the registered
 mask region against the truth (mm), the lips' opening as detected (mm), and the outcome (flags, or
-the gate that refused). The template's mouth is closed; `lips_apart_mm` is the gate.
+the gate that refused). The template's mouth is closed; `lips_apart_mm` is the gate. With
+--mesh, each capture is made a mesh scan turned at random, coloured or bare (landmarks from renders).
 
-Usage: .venv/bin/python bench/open_mouth.py [--seeds 6] [--first 100] [--mm 0,2,4,8] [--mask oronasal]
+Usage: .venv/bin/python bench/open_mouth.py [--seeds 6] [--first 100] [--mm 0,2,4,8] [--mask oronasal] [--mesh colour|bare]
 """
 
 import argparse
@@ -11,6 +12,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import load_capture
@@ -18,20 +20,25 @@ from cpapfit.io.phantom import write_phantom
 from cpapfit.phantom import FRAMED, make_phantom
 from cpapfit.pipeline import design
 from cpapfit.template import load_template
+from landmarks_alignment import as_mesh
 
 
-def one(seed: int, mm: float, mask: str) -> str:
-    """A table row: the design of subject `seed` with its lower lip moved `mm`."""
+def one(seed: int, mm: float, mask: str, mesh: str | None) -> str:
+    """A table row: the design of subject `seed` with its lower lip moved `mm` (as a `mesh` scan)."""
     ph = make_phantom(seed, pose=FRAMED, mouth_open_mm=mm)
     with tempfile.TemporaryDirectory() as tmp:
         write_phantom(ph, Path(tmp))
         scan = load_capture(Path(tmp))
+    truth = ph.surface
+    if mesh:
+        turn = Rotation.random(random_state=seed).as_matrix()
+        scan, truth = as_mesh(scan, turn, mesh == "colour"), truth @ turn.T
     try:
         d = design(scan, mask)
     except CpapfitError as exc:
         return f"| {seed} | {mm:g} | - | - | refused: {str(exc).split(':')[0].split('(')[-1].rstrip(')')} |"
     band = load_template().regions[mask].band
-    err = float(np.linalg.norm(d.registration.vertices[band] - ph.surface[band], axis=1).mean())
+    err = float(np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean())
     flags = ", ".join(g.code for g in d.quality.flags) or "none"
     return f"| {seed} | {mm:g} | {err:.2f} | {d.alignment.landmarks.lips_apart_mm:.1f} | flagged: {flags} |"
 
@@ -42,13 +49,15 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=100)
     ap.add_argument("--mm", default="0,2,4,8", help="how far the lower lip moves, mm, comma-separated")
     ap.add_argument("--mask", default="oronasal")
+    ap.add_argument("--mesh", choices=("colour", "bare"), default=None, help="as a mesh scan, turned at random")
     args = ap.parse_args()
-    print(f"{args.mask} mask; framed subjects {args.first}-{args.first + args.seeds - 1}")
+    kind = f"as {args.mesh} meshes" if args.mesh else "as captures"
+    print(f"{args.mask} mask; framed subjects {args.first}-{args.first + args.seeds - 1}, {kind}")
     print("| subject | lower lip moved (mm) | mask region error, mean (mm) | lips apart, detected (mm) | outcome |")
     print("|---|---|---|---|---|")
     for seed in range(args.first, args.first + args.seeds):
         for mm in map(float, args.mm.split(",")):
-            print(one(seed, mm, args.mask), flush=True)
+            print(one(seed, mm, args.mask, args.mesh), flush=True)
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ Measured once the template is registered and the seal carried over (all mm):
   mask, that much too small or large; a focal length misstated by k makes it k times too deep for
   its breadth. Adult faces lie well inside the flag thresholds, so a face past them is more likely
   a misstated scan than a face, and it is said which setting to check;
-- lips apart (oronasal masks): how far apart the detected inner lips are (`landmarks/mouth.py`).
+- lips apart (oronasal masks): how far apart the lips are (`landmarks/mouth.py`).
   The template's mouth is closed and does not follow a dropped jaw: on framed synthetic subjects
   whose lower lip moved 4 mm the oronasal seal region lands 0.9-2.7 mm off its place (closed:
   0.3-0.9), 8 mm 2.2-3.4 mm, with every other gate clean. Nasal masks are not affected.
@@ -83,8 +83,9 @@ class QualityParams:
         below / above).
     flat_face_* / deep_face_*: its depth for its breadth against the template's
         (`Proportions.depth_ratio`, bad below / above).
-    lips_apart_*_mm: the detected inner lips' distance, mm (bad above; oronasal masks only): closed
-        mouths read 0.6-1.4 mm on synthetic subjects and 0.7-1.2 mm on the shared real scans.
+    lips_apart_*_mm: how far apart the lips are (`landmarks/mouth.py`), mm (bad above; oronasal
+        masks only): closed mouths read 0-0.8 mm on synthetic captures, 0-5.3 mm on the same as
+        meshes (holes along the lips' crease), 0 on the shared real scans.
     Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
     flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin. The
     face's proportions, over 959 synthetic designs with nothing misstated: size 0.83-1.16, depth

@@ -10,10 +10,12 @@ from cpapfit.errors import QualityError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.landmarks import landmarks_record, read_landmarks
 from cpapfit.io.phantom import write_phantom
+from cpapfit.landmarks.mouth import _gap_in_depth
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.phantom import FRAMED, make_phantom
 from cpapfit.pipeline import align, design
 from cpapfit.quality import QualityParams, _mouth_gates
+from cpapfit.scan import Intrinsics, Scan
 from cpapfit.template import load_template
 
 SEED = 101
@@ -73,6 +75,30 @@ def test_an_open_mouth_refuses_the_oronasal_cushion_and_not_the_nasal(closed_and
     assert "lips_apart_mm" not in {g.code for g in nasal.quality.gates}
     band = load_template().regions["nasal"].band
     assert np.linalg.norm(nasal.registration.vertices[band] - opened.surface[band], axis=1).mean() < 1.0  # mm
+
+
+def test_a_mesh_with_an_open_mouth_is_refused_too(closed_and_open):
+    """The same open capture as a coloured mesh: the landmarks come from a render of it."""
+    _, (_, capture) = closed_and_open
+    colors = np.zeros((len(capture.vertices), 3), dtype=np.uint8)
+    colors[capture.pixel_vertex[capture.valid]] = capture.image[capture.valid]
+    mesh = Scan(capture.vertices, capture.faces, capture.normals, colors=colors)
+    assert align(mesh).landmarks.path == "render"
+    with pytest.raises(QualityError, match="lips_apart_mm"):
+        design(mesh, "oronasal")
+
+
+@pytest.mark.parametrize("skin, rows, expected_px", [
+    (np.nan, (40, 48), 8), (520.0, (30, 50), 20), (503.0, (30, 50), 0), (500.0, (30, 50), 0),
+])
+def test_the_gap_in_the_depth_is_the_longest_run_without_skin(skin, rows, expected_px):
+    """Lips at 500 mm, a run of rows with no depth, depth 20 mm behind (the inside of the mouth), or
+    3 mm behind (still the lips): the run's length in mm is its pixels at 500 mm, to within a pixel."""
+    intrinsics = Intrinsics(100, 100, 600.0, 600.0, 50.0, 50.0)
+    depth = np.full((100, 100), 500.0)
+    depth[rows[0]:rows[1], :] = skin
+    gap = _gap_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, intrinsics)
+    assert gap == pytest.approx(expected_px * 500.0 / 600.0, abs=500.0 / 600.0)
 
 
 @pytest.mark.parametrize("mm, mask, expected", [

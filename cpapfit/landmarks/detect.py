@@ -141,5 +141,5 @@ def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndar
     rotation = basis.T @ fit.rotation
     scan_fit = Similarity(fit.scale, rotation, basis.T @ fit.translation + origin, fit.weights, fit.rms_mm, fit.iterations)
     note = f"{note}; {len(index)} landmarks lifted and facing the camera, {inliers} agree with the template"
-    lips = lips_apart_mm(uv, fit, template.landmarks, sight.intrinsics)
+    lips = lips_apart_mm(uv, fit, template.landmarks, sight.depth, sight.intrinsics)
     return Detection(Landmarks(points, index.astype(np.int64), fit.weights, "image", note, lips_apart_mm=lips), scan_fit, inliers)

@@ -1,9 +1,15 @@
-"""How far apart the lips are: Face Mesh's inner-lip landmarks (13 upper, 14 lower), in mm.
+"""How far apart the lips are, in mm, read twice from a detection and the depth under it.
 
 An open mouth drops the jaw, and the template's closed mouth does not follow it: the oronasal
-seal's chin part then lands millimetres from its place (see `quality`). A detection's inner-lip
-pixels usually fall over the open mouth, where the depth has no skin, so they are not lifted;
-instead each is taken to the depth the template's fitted lip has there.
+seal's chin part then lands millimetres from its place (see `quality`). Two readings, the smaller
+kept, as each over-reads in its own way:
+- Face Mesh's inner lips (13 upper, 14 lower): over an open mouth the depth has no skin, so each
+  is taken to the depth of the fitted template's lip there. MediaPipe over-reads a mouth whose lips
+  a render or a colour image shows with a gap of background between them (a mesh with holes along
+  the lips' crease reads 5-18 mm closed);
+- the depth down the middle of the lips, from the top of the upper lip (landmark 0) to the bottom
+  of the lower (17): the longest run with no skin (no depth, or over MOUTH_DEPTH_MM behind the
+  lips). Holes in the scan there over-read it.
 """
 
 import numpy as np
@@ -12,16 +18,43 @@ from ..align.similarity import Similarity
 from ..scan import Intrinsics
 
 UPPER_INNER, LOWER_INNER = 13, 14
+UPPER_OUTER, LOWER_OUTER = 0, 17
+MOUTH_DEPTH_MM = 5.0  # depth this far behind the lips is the inside of the mouth
+STEP_PX = 0.5
 
 
-def lips_apart_mm(uv: np.ndarray, fit: Similarity, template_landmarks: np.ndarray, intrinsics: Intrinsics) -> float:
-    """Distance (mm) between the inner lips seen at pixels uv[13] and uv[14] ((468, 2) uv), each
-    taken to the camera depth of its template landmark under `fit` (template -> camera, mm)."""
-    pair = [UPPER_INNER, LOWER_INNER]
-    z = fit.apply(template_landmarks[pair])[:, 2]
-    x = (uv[pair, 0] - intrinsics.cx) / intrinsics.fx * z
-    y = (uv[pair, 1] - intrinsics.cy) / intrinsics.fy * z
-    return float(np.linalg.norm([x[0] - x[1], y[0] - y[1], z[0] - z[1]]))
+def lips_apart_mm(uv: np.ndarray, fit: Similarity, template_landmarks: np.ndarray, depth_mm: np.ndarray,
+                  intrinsics: Intrinsics) -> float:
+    """The smaller of the two readings (mm) for a detection: (468, 2) pixels `uv`, the similarity
+    `fit` (template -> camera, mm), the (H, W) camera depth (mm, NaN where none)."""
+    lips = fit.apply(template_landmarks[[UPPER_INNER, LOWER_INNER, UPPER_OUTER, LOWER_OUTER]])
+    inner = np.linalg.norm(np.subtract(*_at_depth(uv[[UPPER_INNER, LOWER_INNER]], lips[:2, 2], intrinsics)))
+    return float(min(inner, _gap_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)))
+
+
+def _at_depth(uv: np.ndarray, z: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """(K, 3) camera points (mm) of (K, 2) pixels at depths (K,) mm."""
+    return np.stack([(uv[:, 0] - intrinsics.cx) / intrinsics.fx * z, (uv[:, 1] - intrinsics.cy) / intrinsics.fy * z, z], axis=1)
+
+
+def _gap_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics) -> float:
+    """Length (mm) of the longest run without skin along the pixel segment `ends` (2, 2), whose ends
+    lie at depths `z` (2,) mm: depth missing there, or over MOUTH_DEPTH_MM behind the segment."""
+    count = max(2, int(np.ceil(np.linalg.norm(ends[1] - ends[0]) / STEP_PX)) + 1)
+    t = np.linspace(0.0, 1.0, count)
+    uv = ends[0] + t[:, None] * (ends[1] - ends[0])
+    h, w = depth_mm.shape
+    col, row = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1]).T
+    expected = z[0] + t * (z[1] - z[0])
+    seen = depth_mm[row, col]
+    open_ = ~(seen <= expected + MOUTH_DEPTH_MM)  # NaN (no depth) counts as open
+    if not open_.any():
+        return 0.0
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], open_.astype(np.int8), [0]])))
+    starts, stops = edges[::2], edges[1::2] - 1
+    k = int(np.argmax(stops - starts))
+    a, b = _at_depth(uv[[starts[k], stops[k]]], expected[[starts[k], stops[k]]], intrinsics)
+    return float(np.linalg.norm(a - b))
 
 
 def lips_apart_in_points(points: np.ndarray, template_index: np.ndarray) -> float:
