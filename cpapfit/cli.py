@@ -201,9 +201,10 @@ def cmd_demo(args) -> int:
 def cmd_phantom(args) -> int:
     if not 0.0 <= args.mouth_open <= 30.0:
         raise InputError(f"--mouth-open {args.mouth_open:g}: give 0-30 mm")
-    files = write_phantom(make_phantom(args.seed, mouth_open_mm=args.mouth_open), Path(args.out))
+    files = write_phantom(make_phantom(args.seed, mouth_open_mm=args.mouth_open, glasses=args.glasses), Path(args.out))
     opened = f", mouth open {args.mouth_open:g} mm" if args.mouth_open else ""
-    info(f"wrote synthetic subject seed {args.seed}{opened}: {len(files)} files in {args.out}")
+    worn = ", wearing glasses" if args.glasses else ""
+    info(f"wrote synthetic subject seed {args.seed}{opened}{worn}: {len(files)} files in {args.out}")
     return 0
 
 
@@ -258,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output capture folder")
     p.add_argument("--mouth-open", type=float, default=0.0, metavar="MM",
                    help="drop the jaw: the lower lip moves this far, mm (default 0: closed)")
+    p.add_argument("--glasses", action="store_true", help="put a glasses frame on the face (seen by the camera, not in the truth)")
     p.set_defaults(func=cmd_phantom)
 
     scan_help = "mesh file (PLY, OBJ, STL, OFF, GLB) or RGB-D capture folder"

@@ -1,7 +1,7 @@
 """Synthetic subjects with ground truth: a face that is not the template, seen by a depth camera.
 
 `make_phantom(seed)` changes the template's identity smoothly (nose, cheeks, face size, chin and
-low-frequency bumps), opens the mouth if asked (`open_mouth`), poses the head in front of a virtual 640x480 depth camera at 350-700 mm,
+low-frequency bumps), opens the mouth or puts glasses on (`glasses.py`) if asked, poses the head in front of a virtual 640x480 depth camera at 350-700 mm,
 and renders a shaded colour image and a depth image with realistic sensor effects. The truth is
 the subject's surface in the template's vertex order, in the camera frame (mm), so the true
 position of every template vertex (landmarks, contact regions) is known.
@@ -10,11 +10,13 @@ position of every template vertex (landmarks, contact regions) is known.
 from dataclasses import dataclass, replace
 
 import numpy as np
+import trimesh
 from matplotlib.path import Path as Polygon
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from .frozen import freeze_arrays
+from .glasses import glasses_mesh
 from .render import Hits, raycast, shade
 from .scan import Intrinsics
 from .template import N_LANDMARKS, Template, load_template
@@ -97,12 +99,13 @@ class Phantom:
 
 def make_phantom(
     seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None,
-    pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0,
+    pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0, glasses: bool = False,
 ) -> Phantom:
     """The synthetic subject of `seed`: same seed, same arrays, bit for bit. `yaw_deg` turns the
     head by that yaw, `distance_mm` sets it that far from the camera, instead of the random ones;
     `pose` bounds the random pose (everything else as for the seed: the same face whatever the pose);
-    `mouth_open_mm` > 0 drops the jaw: the lower inner lip moves that far (`open_mouth`)."""
+    `mouth_open_mm` > 0 drops the jaw: the lower inner lip moves that far (`open_mouth`); `glasses`
+    puts a frame on the face (`glasses.glasses_mesh`), seen by the camera, not part of the truth."""
     rng = np.random.default_rng(seed)
     template = load_template()
     identity = random_identity(rng)
@@ -110,10 +113,16 @@ def make_phantom(
     if mouth_open_mm > 0:
         face, mouth = open_mouth(face, template, mouth_open_mm)
         identity = {**identity, "mouth_open_mm": float(mouth_open_mm)}
+    worn = glasses_mesh(face, template) if glasses else trimesh.Trimesh()
+    if glasses:
+        identity = {**identity, "glasses": True}
     intrinsics = random_intrinsics(rng)
     surface, placed = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm, pose)
-    hits = raycast(surface, template.faces, intrinsics)
-    image = colour_image(hits, surface, template, rng, mouth)
+    seen = np.vstack([surface, (np.asarray(worn.vertices).reshape(-1, 3) - placed["template_centre_mm"]) @ np.array(placed["rotation"]).T
+                      + placed["translation_mm"]])
+    triangles = np.vstack([template.faces, np.asarray(worn.faces, dtype=np.int64).reshape(-1, 3) + len(surface)])
+    hits = raycast(seen, triangles, intrinsics)
+    image = colour_image(hits, seen, triangles, template, rng, mouth)
     depth_raw = sensor_depth(hits, intrinsics, sensor, rng)
     return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, placed)
 
@@ -162,6 +171,7 @@ LOWER_INNER_LIP = [78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308]
 JAW_HINGE_MM = (25.0, -85.0)  # the jaw's hinge from the upper inner lip (template frame): up, forward
 CAVITY_MM = 20.0  # how far behind the lips an open mouth's inside lies
 MOUTH_INSIDE = np.array([0.12, 0.04, 0.04])  # its albedo
+FRAME = np.array([0.08, 0.07, 0.07])  # a glasses frame's albedo
 
 
 def open_mouth(face: np.ndarray, template: Template, gap_mm: float) -> tuple[np.ndarray, np.ndarray]:
@@ -268,14 +278,17 @@ def _near_edges(template: Template, feature: str, radius: float) -> np.ndarray:
     return (np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=-1) < radius).any(axis=1)
 
 
-def colour_image(hits: Hits, surface: np.ndarray, template: Template, rng: np.random.Generator, mouth: np.ndarray) -> np.ndarray:
-    """(H, W, 3) uint8 shaded colour image with a random light and mild sensor noise; the (N,) bool
-    `mouth` vertices are the dark inside of an open mouth."""
+def colour_image(hits: Hits, seen: np.ndarray, triangles: np.ndarray, template: Template, rng: np.random.Generator,
+                 mouth: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 shaded colour image with a random light and mild sensor noise of the face
+    (its first N vertices of `seen`, the template's) and anything worn on it (the rest, in FRAME's
+    colour); the (N,) bool `mouth` vertices are the dark inside of an open mouth."""
     light = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.6, 0.1), -1.0])
     background = rng.uniform(0.35, 0.75) * np.array([1.0, 1.02, 1.06])
     albedo = skin_albedo(template, rng)
     albedo[mouth] = MOUTH_INSIDE
-    image = shade(hits, surface, template.faces, albedo, light=light, background=background)
+    albedo = np.vstack([albedo, np.tile(FRAME, (len(seen) - len(albedo), 1))])
+    image = shade(hits, seen, triangles, albedo, light=light, background=background)
     noisy = image.astype(np.float64) + rng.normal(0.0, 2.0, image.shape)
     return np.clip(np.round(noisy), 0, 255).astype(np.uint8)
 

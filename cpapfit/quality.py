@@ -33,6 +33,10 @@ Measured once the template is registered and the seal carried over (all mm):
   mask, that much too small or large; a focal length misstated by k makes it k times too deep for
   its breadth. Adult faces lie well inside the flag thresholds, so a face past them is more likely
   a misstated scan than a face, and it is said which setting to check;
+- in front of the face (`in_front.py`): the area of scan surface over 5 mm out from the registered
+  face over its middle (eyes, nose, mouth, chin): glasses, a hand, a tube or hair. Glasses rest their
+  pads where the nasal seal goes: on synthetic subjects wearing a thin frame the seal lay up to
+  0.8-3.0 mm off the skin, on the pads, mostly unflagged; clean faces read 0 mm²;
 - lips apart (oronasal masks): how far apart the lips are (`landmarks/mouth.py`).
   The template's mouth is closed and does not follow a dropped jaw: on framed synthetic subjects
   whose lower lip moved 4 mm the oronasal seal region lands 0.9-2.7 mm off its place (closed:
@@ -52,6 +56,7 @@ from .contact import Contact
 from .errors import QualityError
 from .evaluate.gap import SPACINGS, RimGap, off_skin
 from .evaluate.rim import spacing
+from .in_front import IN_FRONT_MM, in_front_area_mm2
 from .landmarks.types import Landmarks
 from .proportions import Proportions
 from .scan import Scan
@@ -83,6 +88,8 @@ class QualityParams:
         below / above).
     flat_face_* / deep_face_*: its depth for its breadth against the template's
         (`Proportions.depth_ratio`, bad below / above).
+    in_front_*_mm2: area of scan over 5 mm in front of the middle of the registered face, mm² (bad
+        above): 0 on synthetic subjects and the shared real scans, 180-340 with a thin glasses frame.
     lips_apart_*_mm: how far apart the lips are (`landmarks/mouth.py`), mm (bad above; oronasal
         masks only): closed mouths read 0-0.8 mm on synthetic captures, 0-5.3 mm on the same as
         meshes (holes along the lips' crease), 0 on the shared real scans.
@@ -118,6 +125,8 @@ class QualityParams:
     flat_face_refuse: float = 0.77
     deep_face_flag: float = 1.18
     deep_face_refuse: float = 1.3
+    in_front_flag_mm2: float = 30.0
+    in_front_refuse_mm2: float = 150.0
     lips_apart_flag_mm: float = 6.0
     lips_apart_refuse_mm: float = 11.0
 
@@ -194,6 +203,7 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
     matched = registration.residual[band][registration.valid[band]]
     residual = float(np.median(matched)) if len(matched) else np.inf
     off_rim = rim.worst_stretch_mm()
+    ahead = in_front_area_mm2(scan.vertices, tree, registration, load_template())
     gates = [
         _gate("coverage", near, (p.coverage_flag, p.coverage_refuse), f"the scan covers {100 * near:.0f} % of the {mask} mask's seal region",
               "rescan with the whole mask region (nose, cheeks, lips) in view, facing the camera", " %"),
@@ -202,6 +212,10 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
         _gate("residual_mm", residual, (p.residual_flag_mm, p.residual_refuse_mm),
               f"the registered face lies a median {residual:.2f} mm from the scan over the seal",
               "a noisy scan, or one that moved: rescan holding still"),
+        _gate("in_front_mm2", ahead, (p.in_front_flag_mm2, p.in_front_refuse_mm2),
+              f"{ahead:.0f} mm² of the scan stands over {IN_FRONT_MM:g} mm in front of the face around the eyes, nose and mouth",
+              "glasses, a hand, a tube or hair between the camera and the skin? glasses rest on the nose where the seal goes: "
+              "take them off, clear the face and rescan", " mm²"),
         _gate("rim_gap_mm", off_rim, (p.rim_gap_flag_mm, p.rim_gap_refuse_mm),
               f"the cushion's rim stands up to {off_rim:.1f} mm off the scanned skin over several mm of rim",
               "the template missed the face there: give landmarks with --landmarks, or rescan facing the camera"),

@@ -23,6 +23,7 @@ ROWS = {
     ("depth_ratio", "flatter"): ("flat_face_flag", "flat_face_refuse"),
     ("depth_ratio", "deeper"): ("deep_face_flag", "deep_face_refuse"),
     ("lips_apart_mm", ""): ("lips_apart_flag_mm", "lips_apart_refuse_mm"),
+    ("in_front_mm2", ""): ("in_front_flag_mm2", "in_front_refuse_mm2"),
 }
 ALWAYS_FLAGGED = ("landmark_free",)  # no threshold: flagged whenever it happens, never refused
 
@@ -46,7 +47,7 @@ def threshold(cell: str) -> float:
     """A table cell's threshold: "> 2 mm" is 2, "< 75 %" 0.75, "never" infinite."""
     if cell == "never":
         return float("inf")
-    m = re.fullmatch(r"[<>] ([\d.]+) (%|mm)", cell)
+    m = re.fullmatch(r"[<>] ([\d.]+) (%|mm²|mm)", cell)
     return float(m.group(1)) * (0.01 if m.group(2) == "%" else 1.0)
 
 
@@ -61,7 +62,7 @@ def test_every_gate_has_one_row():
 
 
 def test_every_threshold_is_in_the_table():
-    fields = {f for f in vars(QualityParams()) if f.endswith(("_flag", "_refuse", "_flag_mm", "_refuse_mm"))}
+    fields = {f for f in vars(QualityParams()) if f.endswith(("_flag", "_refuse", "_flag_mm", "_refuse_mm", "_flag_mm2", "_refuse_mm2"))}
     assert fields == {f for pair in ROWS.values() for f in pair}
 
 

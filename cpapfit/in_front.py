@@ -1,0 +1,46 @@
+"""What stands in front of the face: scan surface far out from the registered face, over its middle.
+
+Glasses, a hand, a tube or hair between the camera and the skin: the registration passes behind
+them (its pairs reject points that far off), so they are scan points lying well out along the
+registered face's normals. Glasses rest their pads on the sides of the nose, where the seal goes:
+on synthetic subjects wearing them the seal lay up to 0.8-3.0 mm off the skin, on the pads, mostly
+unflagged.
+"""
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from .align.nonrigid import Registration
+from .evaluate.rim import spacing
+from .template import Template
+
+IN_FRONT_MM = 5.0  # scan this far out from the registered face is not skin
+# The middle of the face: template vertices this close to the eye corners, nasion, nose tip, lips and chin.
+MIDDLE_LANDMARKS = (33, 133, 263, 362, 168, 4, 0, 17, 152)
+MIDDLE_RADIUS_MM = 30.0
+
+
+def middle_of_face(template: Template) -> np.ndarray:
+    """(N,) bool: the template vertices of the middle of the face."""
+    near = [np.linalg.norm(template.vertices - template.landmarks[i], axis=1) for i in MIDDLE_LANDMARKS]
+    return np.min(near, axis=0) < MIDDLE_RADIUS_MM
+
+
+def in_front_area_mm2(points: np.ndarray, tree: cKDTree, registration: Registration, template: Template) -> float:
+    """Area (mm²) of the scan's (N, 3) `points` (mm; `tree` over them) lying over IN_FRONT_MM out
+    from the registered face, over its middle where the registration found skin: each point counts
+    the square of its distance to the nearest other point, at most twice the scan's usual spacing
+    (a stray point far from the others is not a large surface)."""
+    face = registration.vertices
+    normals = np.asarray(trimesh.Trimesh(face, template.faces, process=False).vertex_normals)
+    reach = IN_FRONT_MM + MIDDLE_RADIUS_MM
+    dist, idx = cKDTree(face).query(points, distance_upper_bound=reach, workers=-1)
+    found = np.isfinite(dist)
+    idx = np.where(found, idx, 0)
+    height = np.einsum("ij,ij->i", points - face[idx], normals[idx])
+    out = found & middle_of_face(template)[idx] & registration.valid[idx] & (height > IN_FRONT_MM)
+    if not out.any():
+        return 0.0
+    apart = np.minimum(tree.query(points[out], k=2)[0][:, 1], 2.0 * spacing(tree))
+    return float(np.sum(apart**2))
