@@ -19,6 +19,7 @@ IN_FRONT_MM = 5.0  # scan this far out from the registered face is not skin
 # The middle of the face: template vertices this close to the eye corners, nasion, nose tip, lips and chin.
 MIDDLE_LANDMARKS = (33, 133, 263, 362, 168, 4, 0, 17, 152)
 MIDDLE_RADIUS_MM = 30.0
+NEIGHBOURS = 8  # a point counts if most of its nearest scan points (itself one) stand out too
 
 
 def middle_of_face(template: Template) -> np.ndarray:
@@ -29,9 +30,9 @@ def middle_of_face(template: Template) -> np.ndarray:
 
 def in_front_area_mm2(points: np.ndarray, tree: cKDTree, registration: Registration, template: Template) -> float:
     """Area (mm²) of the scan's (N, 3) `points` (mm; `tree` over them) lying over IN_FRONT_MM out
-    from the registered face, over its middle where the registration found skin: each point counts
-    the square of its distance to the nearest other point, at most twice the scan's usual spacing
-    (a stray point far from the others is not a large surface)."""
+    from the registered face, over its middle where the registration found skin, with most of its
+    NEIGHBOURS nearest points (a depth camera's noise spike stands out alone): each counts the square
+    of its distance to the nearest other point, at most twice the scan's usual spacing."""
     face = registration.vertices
     normals = np.asarray(trimesh.Trimesh(face, template.faces, process=False).vertex_normals)
     reach = IN_FRONT_MM + MIDDLE_RADIUS_MM
@@ -39,8 +40,9 @@ def in_front_area_mm2(points: np.ndarray, tree: cKDTree, registration: Registrat
     found = np.isfinite(dist)
     idx = np.where(found, idx, 0)
     height = np.einsum("ij,ij->i", points - face[idx], normals[idx])
-    out = found & middle_of_face(template)[idx] & registration.valid[idx] & (height > IN_FRONT_MM)
-    if not out.any():
+    out = np.flatnonzero(found & middle_of_face(template)[idx] & registration.valid[idx] & (height > IN_FRONT_MM))
+    if not len(out):
         return 0.0
-    apart = np.minimum(tree.query(points[out], k=2)[0][:, 1], 2.0 * spacing(tree))
-    return float(np.sum(apart**2))
+    apart, near = tree.query(points[out], k=NEIGHBOURS)
+    solid = np.median(np.where(found, height, -np.inf)[near], axis=1) > IN_FRONT_MM  # not a lone noise spike
+    return float(np.sum(np.minimum(apart[solid, 1], 2.0 * spacing(tree)) ** 2))

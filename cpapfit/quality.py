@@ -89,7 +89,7 @@ class QualityParams:
     flat_face_* / deep_face_*: its depth for its breadth against the template's
         (`Proportions.depth_ratio`, bad below / above).
     in_front_*_mm2: area of scan over 5 mm in front of the middle of the registered face, mm² (bad
-        above): 0 on synthetic subjects and the shared real scans, 180-340 with a thin glasses frame.
+        above): 0 on synthetic subjects and the shared real scans, 177-340 with a thin glasses frame.
     lips_apart_*_mm: how far apart the lips are (`landmarks/mouth.py`), mm (bad above; oronasal
         masks only): closed mouths read 0-0.8 mm on synthetic captures, 0-5.3 mm on the same as
         meshes (holes along the lips' crease), 0 on the shared real scans.

@@ -60,3 +60,12 @@ def test_the_area_in_front_is_the_plate_standing_out_past_5_mm(height_mm, expect
     area = in_front_area_mm2(points, cKDTree(points), registration, t)
     assert area == pytest.approx(expected_mm2, abs=5.0)
     assert QualityParams().in_front_flag_mm2 < 100.0 - 5.0  # such a plate is flagged
+
+
+def test_a_lone_point_far_out_is_noise_not_a_surface():
+    """A depth camera's noise spike: one scan point 10 mm out from the nose tip counts nothing."""
+    t = load_template()
+    spike = t.vertices[4] + 10.0 * np.asarray(t.mesh().vertex_normals)[4]
+    points = np.vstack([t.vertices, spike])
+    registration = Registration(t.vertices, np.zeros(len(t.vertices)), np.ones(len(t.vertices), dtype=bool))
+    assert in_front_area_mm2(points, cKDTree(points), registration, t) == 0.0
