@@ -12,6 +12,7 @@ import trimesh
 from .template import Template
 
 RIM_MM = (25.0, 17.0)  # half width, half height
+RIM_DROP_MM = 3.0  # the rims' middle below the eye corners' level
 LENS_FORWARD_MM = 14.0
 TUBE_MM = 1.2
 PAD_RADIUS_MM, PAD_THICK_MM, PAD_BELOW_NASION_MM, PAD_BESIDE_MM = 4.0, 1.5, 10.0, 8.0
@@ -23,13 +24,13 @@ def glasses_mesh(face: np.ndarray, template: Template) -> trimesh.Trimesh:
     """The frame (mm, template frame) worn on `face`, the (N, 3) template vertices of a subject."""
     normals = np.asarray(trimesh.Trimesh(face, template.faces, process=False).vertex_normals)
     centres = [_lens_centre(face, *corners) for corners in EYES]
-    inner = [c - [np.sign(c[0]) * RIM_MM[0], -3.0, 0.0] for c in centres]  # each rim's inner edge
+    inner = [c - [np.sign(c[0]) * RIM_MM[0], RIM_DROP_MM, 0.0] for c in centres]  # each rim's inner edge
     parts = [_rim(c) for c in centres]
     parts.append(_tube(np.array([inner[0], face[NASION] + [0.0, 2.0, 6.0], inner[1]])))
     for side, rim in zip((-1.0, 1.0), inner):
         parts += _pad(face, normals, side, rim)
     for c in centres:
-        hinge = c + [np.sign(c[0]) * RIM_MM[0], 3.0, 0.0]
+        hinge = c + [np.sign(c[0]) * RIM_MM[0], -RIM_DROP_MM, 0.0]
         parts.append(_tube(hinge + np.array([[0.0, 0.0, 0.0], [5.0, 0.0, -40.0], [8.0, 0.0, -100.0]]) * [np.sign(c[0]), 1, 1]))
     return trimesh.util.concatenate(parts)
 
@@ -41,9 +42,10 @@ def _lens_centre(face: np.ndarray, outer: int, inner: int) -> np.ndarray:
 
 
 def _rim(centre: np.ndarray) -> trimesh.Trimesh:
-    """A lens rim: an ellipse about `centre`, its outer side swept back a little round the face."""
+    """A lens rim: an ellipse about `centre` (RIM_DROP_MM lower), its outer side swept 3 mm back round the face."""
     t = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
-    ring = np.stack([RIM_MM[0] * np.cos(t), RIM_MM[1] * np.sin(t) - 3.0, -3.0 * np.cos(t) ** 2 * np.sign(centre[0])], axis=1)
+    outward = np.clip(np.cos(t) * np.sign(centre[0]), 0.0, None)  # 1 at the outer edge, 0 over the inner half
+    ring = np.stack([RIM_MM[0] * np.cos(t), RIM_MM[1] * np.sin(t) - RIM_DROP_MM, -3.0 * outward**2], axis=1)
     return _tube(np.vstack([centre + ring, centre + ring[:1]]))
 
 

@@ -3,7 +3,7 @@
 Glasses, a hand, a tube or hair between the camera and the skin: the registration passes behind
 them (its pairs reject points that far off), so they are scan points lying well out along the
 registered face's normals. Glasses rest their pads on the sides of the nose, where the seal goes:
-on synthetic subjects wearing them the seal lay up to 0.8-3.0 mm off the skin, on the pads, mostly
+on synthetic subjects wearing them the seal lay up to 0.8-2.9 mm off the skin, on the pads, mostly
 unflagged.
 """
 
@@ -20,6 +20,7 @@ IN_FRONT_MM = 5.0  # scan this far out from the registered face is not skin
 MIDDLE_LANDMARKS = (33, 133, 263, 362, 168, 4, 0, 17, 152)
 MIDDLE_RADIUS_MM = 30.0
 NEIGHBOURS = 8  # a point counts if most of its nearest scan points (itself one) stand out too
+REACH_MM = 35.0  # scan points farther from the registered face are not weighed (the neck and chest below the chin)
 
 
 def middle_of_face(template: Template) -> np.ndarray:
@@ -29,20 +30,21 @@ def middle_of_face(template: Template) -> np.ndarray:
 
 
 def in_front_area_mm2(points: np.ndarray, tree: cKDTree, registration: Registration, template: Template) -> float:
-    """Area (mm²) of the scan's (N, 3) `points` (mm; `tree` over them) lying over IN_FRONT_MM out
-    from the registered face, over its middle where the registration found skin, with most of its
+    """Area (mm²) of the scan's (N, 3) `points` (mm; `tree` over them) lying IN_FRONT_MM to REACH_MM
+    out from the registered face, over its middle where the registration found skin, with most of its
     NEIGHBOURS nearest points (a depth camera's noise spike stands out alone): each counts the square
-    of its distance to the nearest other point, at most twice the scan's usual spacing."""
+    of its distance to the nearest other point (at another place), at most twice the scan's usual spacing."""
     face = registration.vertices
     normals = np.asarray(trimesh.Trimesh(face, template.faces, process=False).vertex_normals)
-    reach = IN_FRONT_MM + MIDDLE_RADIUS_MM
-    dist, idx = cKDTree(face).query(points, distance_upper_bound=reach, workers=-1)
+    dist, idx = cKDTree(face).query(points, distance_upper_bound=REACH_MM, workers=-1)
     found = np.isfinite(dist)
     idx = np.where(found, idx, 0)
     height = np.einsum("ij,ij->i", points - face[idx], normals[idx])
     out = np.flatnonzero(found & middle_of_face(template)[idx] & registration.valid[idx] & (height > IN_FRONT_MM))
     if not len(out):
         return 0.0
-    apart, near = tree.query(points[out], k=NEIGHBOURS)
+    apart, near = tree.query(points[out], k=min(NEIGHBOURS, len(points)))
     solid = np.median(np.where(found, height, -np.inf)[near], axis=1) > IN_FRONT_MM  # not a lone noise spike
-    return float(np.sum(np.minimum(apart[solid, 1], 2.0 * spacing(tree)) ** 2))
+    usual = spacing(tree)
+    nearest = np.where(apart > 1e-9, apart, np.inf).min(axis=1)  # the nearest other place (a seam repeats points)
+    return float(np.sum(np.minimum(nearest[solid], 2.0 * usual) ** 2))

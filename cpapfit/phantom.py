@@ -168,7 +168,7 @@ def apply_identity(template: Template, p: dict) -> np.ndarray:
 # Face Mesh's inner-lip contours, mouth corner to mouth corner.
 UPPER_INNER_LIP = [78, 191, 80, 81, 82, 13, 312, 311, 310, 415, 308]
 LOWER_INNER_LIP = [78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308]
-JAW_HINGE_MM = (25.0, -85.0)  # the jaw's hinge from the upper inner lip (template frame): up, forward
+JAW_HINGE_MM = (25.0, -85.0)  # the jaw's hinge from the upper inner lip (template frame, mm): 25 up, 85 back
 CAVITY_MM = 20.0  # how far behind the lips an open mouth's inside lies
 MOUTH_INSIDE = np.array([0.12, 0.04, 0.04])  # its albedo
 FRAME = np.array([0.08, 0.07, 0.07])  # a glasses frame's albedo
@@ -193,7 +193,7 @@ def _jaw_weight(template: Template) -> np.ndarray:
     """(N,) how much of the jaw's turn each template vertex takes: 1 below the mouth, 0 above it,
     blended ever more gently beside and beyond the mouth corners."""
     lm, v = template.landmarks, template.vertices
-    upper, lower = lm[UPPER_INNER_LIP[5:]], lm[LOWER_INNER_LIP[5:]]  # the mouth's right half, centre to corner
+    upper, lower = lm[UPPER_INNER_LIP[5:]], lm[LOWER_INNER_LIP[5:]]  # the mouth's +x half, centre to corner (symmetric)
     corner = lm[UPPER_INNER_LIP[-1], 0]
     x = np.minimum(np.abs(v[:, 0]), corner)
     line = 0.5 * (np.interp(x, upper[:, 0], upper[:, 1]) + np.interp(x, lower[:, 0], lower[:, 1]))

@@ -36,7 +36,7 @@ Measured once the template is registered and the seal carried over (all mm):
 - in front of the face (`in_front.py`): the area of scan surface over 5 mm out from the registered
   face over its middle (eyes, nose, mouth, chin): glasses, a hand, a tube or hair. Glasses rest their
   pads where the nasal seal goes: on synthetic subjects wearing a thin frame the seal lay up to
-  0.8-3.0 mm off the skin, on the pads, mostly unflagged; clean faces read 0 mm²;
+  0.8-2.9 mm off the skin, on the pads, mostly unflagged; clean faces read 0 mm²;
 - lips apart (oronasal masks): how far apart the lips are (`landmarks/mouth.py`).
   The template's mouth is closed and does not follow a dropped jaw: on framed synthetic subjects
   whose lower lip moved 4 mm the oronasal seal region lands 0.9-2.7 mm off its place (closed:
@@ -89,7 +89,7 @@ class QualityParams:
     flat_face_* / deep_face_*: its depth for its breadth against the template's
         (`Proportions.depth_ratio`, bad below / above).
     in_front_*_mm2: area of scan over 5 mm in front of the middle of the registered face, mm² (bad
-        above): 0 on synthetic subjects and the shared real scans, 177-340 with a thin glasses frame.
+        above): 0 on synthetic subjects and the shared real scans, 198-349 with a thin glasses frame.
     lips_apart_*_mm: how far apart the lips are (`landmarks/mouth.py`), mm (bad above; oronasal
         masks only): closed mouths read 0-0.8 mm on synthetic captures, 0-5.3 mm on the same as
         meshes (holes along the lips' crease; 6.5 on a partial view pitched 23°), 0 on the shared

@@ -27,7 +27,7 @@ def test_glasses_are_seen_but_are_not_the_face(bare_and_worn):
     """The truth is the face under the frame; the camera sees the frame: nearer depth, dark pixels."""
     bare, worn = bare_and_worn
     assert np.array_equal(bare.surface, worn.surface)
-    nearer = (worn.depth_raw > 0) & ((bare.depth_raw == 0) | (worn.depth_raw.astype(float) < bare.depth_raw - 30))  # 3 mm
+    nearer = (worn.depth_raw > 0) & ((bare.depth_raw == 0) | (worn.depth_raw.astype(float) < bare.depth_raw.astype(float) - 30))  # 3 mm
     assert nearer.sum() > 200  # pixels of frame in front of the skin
     assert worn.image[nearer].mean() < 0.6 * bare.image[nearer].mean()
 

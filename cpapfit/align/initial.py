@@ -25,7 +25,7 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     central = central_face(template)
     if user is not None:
         fit = fit_similarity(template.vertices[user.template_index], user.points)
-        candidates = [Detection(replace(user, confidence=fit.weights, note="user landmarks file"), fit, len(user.points))]
+        candidates = [Detection(replace(user, confidence=fit.weights, path="user", note="user landmarks file"), fit, len(user.points))]
     else:
         candidates = _candidates(scan, template)
     failed = []

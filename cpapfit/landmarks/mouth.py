@@ -9,7 +9,8 @@ kept, as each over-reads in its own way:
   the lips' crease reads 5-18 mm closed);
 - the depth down the middle of the lips, from the top of the upper lip (landmark 0) to the bottom
   of the lower (17): the longest run with no skin (no depth, or over MOUTH_DEPTH_MM behind the
-  lips). Holes in the scan there over-read it.
+  lips). Holes in the scan there over-read it; teeth or tongue within MOUTH_DEPTH_MM of the lips'
+  line under-read a slight opening (not tried on real faces).
 """
 
 import numpy as np
@@ -25,8 +26,9 @@ STEP_PX = 0.5
 
 def lips_apart_mm(uv: np.ndarray, fit: Similarity, template_landmarks: np.ndarray, depth_mm: np.ndarray,
                   intrinsics: Intrinsics) -> float:
-    """The smaller of the two readings (mm) for a detection: (468, 2) pixels `uv`, the similarity
-    `fit` (template -> camera, mm), the (H, W) camera depth (mm, NaN where none)."""
+    """The smaller of the two readings (mm) for a detection: (468, 2) pixels `uv` in the image of the
+    camera `intrinsics`, the similarity `fit` (template -> that camera, mm) of the (468, 3) mm
+    `template_landmarks`, and the (H, W) camera depth (mm, NaN where none)."""
     lips = fit.apply(template_landmarks[[UPPER_INNER, LOWER_INNER, UPPER_OUTER, LOWER_OUTER]])
     inner = np.linalg.norm(np.subtract(*_at_depth(uv[[UPPER_INNER, LOWER_INNER]], lips[:2, 2], intrinsics)))
     return float(min(inner, _gap_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)))
@@ -44,10 +46,12 @@ def _gap_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrins
     t = np.linspace(0.0, 1.0, count)
     uv = ends[0] + t[:, None] * (ends[1] - ends[0])
     h, w = depth_mm.shape
-    col, row = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1]).T
+    pixel = np.round(uv).astype(np.int64)
+    inside = (pixel >= 0).all(axis=1) & (pixel < [w, h]).all(axis=1)
+    col, row = np.clip(pixel, 0, [w - 1, h - 1]).T
     expected = z[0] + t * (z[1] - z[0])
     seen = depth_mm[row, col]
-    open_ = ~(seen <= expected + MOUTH_DEPTH_MM)  # NaN (no depth) counts as open
+    open_ = inside & ~(seen <= expected + MOUTH_DEPTH_MM)  # NaN (no depth) counts as open; off the image, unknown
     if not open_.any():
         return 0.0
     edges = np.flatnonzero(np.diff(np.concatenate([[0], open_.astype(np.int8), [0]])))
