@@ -17,9 +17,14 @@ def backproject(depth_mm: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     """(H, W, 3) camera-frame points (mm) of an (H, W) depth image; NaN depth gives NaN points."""
     h, w = depth_mm.shape
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    x = (u - intrinsics.cx) / intrinsics.fx * depth_mm
-    y = (v - intrinsics.cy) / intrinsics.fy * depth_mm
-    return np.stack([x, y, depth_mm], axis=-1)
+    return backproject_pixels(np.stack([u, v], axis=-1), depth_mm, intrinsics)
+
+
+def backproject_pixels(uv: np.ndarray, z_mm: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
+    """(..., 3) camera-frame points (mm) of (..., 2) pixel coordinates (u, v) at depths (...) mm."""
+    x = (uv[..., 0] - intrinsics.cx) / intrinsics.fx * z_mm
+    y = (uv[..., 1] - intrinsics.cy) / intrinsics.fy * z_mm
+    return np.stack([x, y, z_mm], axis=-1)
 
 
 def project(points: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from ..rgbd import backproject_pixels
 from ..scan import Intrinsics
 
 RADIUS_PX = 2  # 5x5 window
@@ -28,9 +29,7 @@ def lift(uv: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics, radius: i
     z = row_median(ranked, count)
     spread = row_percentile(ranked, count, 90) - row_percentile(ranked, count, 10)
     ok = (count / window.shape[1] >= MIN_VALID_FRACTION) & np.isfinite(z) & (spread <= MAX_SPREAD_MM)
-    x = (uv[:, 0] - intrinsics.cx) / intrinsics.fx * z
-    y = (uv[:, 1] - intrinsics.cy) / intrinsics.fy * z
-    points = np.stack([x, y, z], axis=1)
+    points = backproject_pixels(uv, z, intrinsics)
     points[~ok] = np.nan
     return points, ok
 

@@ -16,6 +16,7 @@ kept, as each over-reads in its own way:
 import numpy as np
 
 from ..align.similarity import Similarity
+from ..rgbd import backproject_pixels
 from ..scan import Intrinsics
 
 UPPER_INNER, LOWER_INNER = 13, 14
@@ -30,13 +31,8 @@ def lips_apart_mm(uv: np.ndarray, fit: Similarity, template_landmarks: np.ndarra
     camera `intrinsics`, the similarity `fit` (template -> that camera, mm) of the (468, 3) mm
     `template_landmarks`, and the (H, W) camera depth (mm, NaN where none)."""
     lips = fit.apply(template_landmarks[[UPPER_INNER, LOWER_INNER, UPPER_OUTER, LOWER_OUTER]])
-    inner = np.linalg.norm(np.subtract(*_at_depth(uv[[UPPER_INNER, LOWER_INNER]], lips[:2, 2], intrinsics)))
+    inner = np.linalg.norm(np.subtract(*backproject_pixels(uv[[UPPER_INNER, LOWER_INNER]], lips[:2, 2], intrinsics)))
     return float(min(inner, _gap_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)))
-
-
-def _at_depth(uv: np.ndarray, z: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
-    """(K, 3) camera points (mm) of (K, 2) pixels at depths (K,) mm."""
-    return np.stack([(uv[:, 0] - intrinsics.cx) / intrinsics.fx * z, (uv[:, 1] - intrinsics.cy) / intrinsics.fy * z, z], axis=1)
 
 
 def _gap_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics) -> float:
@@ -57,7 +53,7 @@ def _gap_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrins
     edges = np.flatnonzero(np.diff(np.concatenate([[0], open_.astype(np.int8), [0]])))
     starts, stops = edges[::2], edges[1::2] - 1
     k = int(np.argmax(stops - starts))
-    a, b = _at_depth(uv[[starts[k], stops[k]]], expected[[starts[k], stops[k]]], intrinsics)
+    a, b = backproject_pixels(uv[[starts[k], stops[k]]], expected[[starts[k], stops[k]]], intrinsics)
     return float(np.linalg.norm(a - b))
 
 
