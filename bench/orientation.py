@@ -1,11 +1,13 @@
-"""The shared fran scan turned, moved and rescaled: every orientation, unit and mesh format must
-give a design, with the seal where the original orientation puts it.
+"""A real mesh scan turned, moved and rescaled: every orientation, unit and mesh format must give
+a design, with the seal where the original orientation puts it.
 
-Each case: fran.obj turned by `Rotation.random(i)`, moved by up to ~0.3 m, written in m, mm or cm
-as OBJ (with its texture), PLY or STL (no texture), then `pipeline.design`. Printed: the seal
-curve's distance to the original's (turned back, mm), the rim gap, leak and safe window.
+Each case: the scan (default the shared fran.obj) turned by `Rotation.random(i)`, moved by up to
+~0.3 m, written in m, mm or cm as OBJ (with its texture), PLY or STL (no texture), then
+`pipeline.design`. Printed: the seal curve's distance to the original's (turned back, mm), the rim
+gap, leak and safe window.
 
-Usage: .venv/bin/python bench/orientation.py [--cases 9] [--mask nasal]   (needs ../shared)
+Usage: .venv/bin/python bench/orientation.py [--cases 9] [--mask nasal] [--scan FILE]
+(the default scan needs ../shared)
 """
 
 import argparse
@@ -19,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.errors import CpapfitError
 from cpapfit.io import load_scan
+from cpapfit.io.units import MM_PER_UNIT
 from cpapfit.pipeline import design
 
 FRAN = Path(__file__).resolve().parents[2] / "shared" / "data" / "fran_cyberware" / "fran.obj"
@@ -30,9 +33,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cases", type=int, default=9)
     ap.add_argument("--mask", default="nasal")
+    ap.add_argument("--scan", type=Path, default=FRAN, help="a mesh scan (units decided from its size)")
     args = ap.parse_args()
-    reference = design(load_scan(FRAN), args.mask).contact.curve
-    mesh = trimesh.load(FRAN, process=False)
+    original = load_scan(args.scan)
+    reference = design(original, args.mask).contact.curve
+    mesh = trimesh.load(args.scan, process=False)
+    mesh.vertices = mesh.vertices * (MM_PER_UNIT[original.units] / 1000.0)  # metres
     print("| case | unit | format | seal vs original: mean | max (mm) | rim gap max (mm) | leak (L/min) | window |")
     print("|---|---|---|---|---|---|---|---|")
     for i in range(args.cases):

@@ -20,6 +20,7 @@ from .io.landmarks import landmarks_record
 from .io.design import evaluation_record, registration_ply
 from .io.phantom import write_phantom
 from .io.summary import counts, summary_csv, summary_html
+from .io.units import UNIT_CHOICES
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import design_job, user_landmarks
 from .landmarks.types import Landmarks
@@ -263,10 +264,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_phantom)
 
     scan_help = "mesh file (PLY, OBJ, STL, OFF, GLB) or RGB-D capture folder"
-    units_help = "units of a mesh scan: mm, cm, m, in (default auto: mm, cm or m, decided from the size of the face)"
+    units_help = "units of a mesh scan: mm, cm, m, um, in (default auto: mm, cm, m or um, decided from the size of the face)"
     p = sub.add_parser("inspect", help="read a scan and say what cpapfit sees in it (units, size, valid depth)")
     p.add_argument("scan", help=scan_help)
-    p.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m", "in"], help=units_help)
+    p.add_argument("--units", default="auto", choices=UNIT_CHOICES, help=units_help)
     p.set_defaults(func=cmd_inspect)
 
     for name, helptext, out_help in (
@@ -278,7 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=helptext)
         p.add_argument("scan", help=scan_help)
         p.add_argument("--out", required=True, help=out_help)
-        p.add_argument("--units", default="auto", choices=["auto", "mm", "cm", "m", "in"], help=units_help)
+        p.add_argument("--units", default="auto", choices=UNIT_CHOICES, help=units_help)
         if name in ("design", "register", "landmarks", "evaluate"):
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":

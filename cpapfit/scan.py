@@ -43,7 +43,7 @@ class Scan:
     pixel_vertex: (H, W) int64 index of the vertex of each valid pixel, -1 elsewhere, or None.
     intrinsics: camera intrinsics of image and depth, or None.
     source: the path the scan was read from.
-    units: the unit the input was in ("mm", "cm" or "m").
+    units: the unit the input was in (a key of `io.units.MM_PER_UNIT`: "mm", "cm", "m", "um" or "in").
     units_note: how that unit was decided, in words.
     """
 

@@ -124,6 +124,22 @@ def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points(
     assert rim_gap(midway + [0, 0, 8.8], None, cloud, None).gap.min() >= 9.0
 
 
+def test_a_rim_over_a_clouds_sparse_patch_is_measured_to_its_skin_not_its_points():
+    """The plane z = 0 sampled every 1 mm but, over a 24 mm square, only every 8 mm (a decimated
+    mesh's vertices are sparse where the face is flat): rim points on the plane there, 5.7 mm from
+    the nearest point, are on the skin (0 mm); 8 mm above it, at least 8 mm off."""
+    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.scan import Scan
+
+    grid = np.stack(np.meshgrid(np.arange(-40, 41, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
+    inside = (np.abs(grid) < 12).all(axis=1)
+    grid = grid[~inside | (grid % 8 == 0).all(axis=1)]
+    cloud = Scan(np.column_stack([grid, np.zeros(len(grid))]), np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1)))
+    rim = np.array([[4.0, 4.0, 0.0], [-4.0, 4.0, 0.0], [4.0, -4.0, 0.0], [-4.0, -4.0, 0.0]])
+    assert rim_gap(rim, None, cloud, None).gap == pytest.approx(np.zeros(4), abs=1e-9)
+    assert rim_gap(rim + [0, 0, 8.0], None, cloud, None).gap.min() >= 8.0
+
+
 def test_a_rim_over_a_mesh_is_measured_to_the_skin_under_its_flange_not_one_stray_sample():
     """The plane z = 0 sampled every 0.5 mm, every 8th sample along each row standing 0.8 mm up (stray
     samples): rim points on the plane right above those samples, 0.3 mm from the closest scan

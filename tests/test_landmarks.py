@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 import trimesh
+from matplotlib import colormaps
 from PIL import Image
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
@@ -112,6 +113,21 @@ def test_untextured_mesh_is_found_by_rendering(rotated_stl):
     lm, fit, _ = initial_alignment(load_scan(path), TEMPLATE)
     assert lm.path == "render"
     assert region_error(fit, surface, faces) <= 3.0
+
+
+def test_colours_that_are_not_skin_are_set_aside_for_the_shaded_renders(rotated_stl, tmp_path):
+    """The bare mesh painted with a rainbow from chin to brow (a scanner's height colours, as the
+    Basel Face Model's mean ships): on its coloured renders the detector's face fails the face
+    check; the renders without the colours find it, and the template lands within 1.5 mm."""
+    path, surface, faces = rotated_stl
+    height = (surface @ Rotation.from_euler("zyx", [130, -70, 40], degrees=True).as_matrix())[:, 1]  # up the face
+    rainbow = (255 * colormaps["jet"]((height - height.min()) / np.ptp(height))[:, :3]).astype(np.uint8)
+    painted = tmp_path / "painted.ply"
+    trimesh.Trimesh(surface / 1000.0, faces, vertex_colors=rainbow, process=False).export(painted)
+    lm, fit, _ = initial_alignment(load_scan(painted), TEMPLATE)
+    assert lm.path == "render" and lm.note.endswith("without the scan's colours")
+    assert lm.rejected == "the face found by render failed the face check"
+    assert region_error(fit, surface, faces) <= 1.5
 
 
 def test_a_mesh_is_seen_from_in_front_whatever_its_orientation(rotated_stl, tmp_path):

@@ -11,14 +11,14 @@ def face_box(extent, n=2000, seed=0):
     return rng.uniform(0, 1, (n, 3)) * np.array([0.7, 1.0, 0.5]) * extent
 
 
-@pytest.mark.parametrize("unit,extent", [("mm", 180.0), ("cm", 18.0), ("m", 0.18), ("mm", 75.0), ("m", 0.55)])
+@pytest.mark.parametrize("unit,extent", [("mm", 180.0), ("cm", 18.0), ("m", 0.18), ("mm", 75.0), ("m", 0.55), ("um", 180000.0)])
 def test_auto_decides_the_unit_that_makes_a_face(unit, extent):
     decided, note = decide_units(face_box(extent))
     assert decided == unit
     assert "decided from the size" in note
 
 
-@pytest.mark.parametrize("extent", [3.0, 5000.0, 0.001])
+@pytest.mark.parametrize("extent", [3.0, 5000.0, 0.001, 5.0e7])
 def test_size_that_fits_no_unit_is_refused(extent):
     with pytest.raises(UnitsError, match="none of"):
         decide_units(face_box(extent))
@@ -45,9 +45,9 @@ def test_inches_are_taken_when_stated_and_named_when_auto_could_mistake_them():
         decide_units(face_box(180.0), "in")
 
 
-@pytest.mark.parametrize("unit,extent", [("mm", 900.0), ("m", 0.9)])
-def test_a_head_and_shoulders_scan_is_taken_in_mm_or_m(unit, extent):
-    """900 mm across (a bust): auto takes it in mm or m, where no unit makes it a face, and says so;
+@pytest.mark.parametrize("unit,extent", [("mm", 900.0), ("m", 0.9), ("um", 900000.0)])
+def test_a_head_and_shoulders_scan_is_taken_in_mm_m_or_um(unit, extent):
+    """900 mm across (a bust): auto takes it in mm, m or um, where no unit makes it a face, and says so;
     stated, it is accepted; past 2 m it is no face scan."""
     decided, note = decide_units(face_box(extent))
     assert decided == unit and "head and shoulders" in note

@@ -17,23 +17,25 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     """Landmarks, the similarity carrying the template onto the scan, and the face check.
 
     User landmarks override detection. Otherwise the first of these that lies on a face wins: the
-    detection; a detection on a render from in front of the face the landmark-free fallback finds
-    (meshes, and point clouds through a surface over their points: a capture's own image is the best
-    view there is); the fallback itself. The winner's `rejected` names those that failed the face
+    detection; for a mesh with colours, the detection on its renders without them (a texture
+    misplaced on the surface, or colours that are not skin, mislead the detector); a detection on a
+    render from in front of the face the landmark-free fallback finds (meshes, and point clouds
+    through a surface over their points: a capture's own image is the best view there is); the
+    fallback itself. The winner's `rejected` names those that failed the face
     check (a capture's colour image not registered to its depth puts the detected face off the
     scanned one). If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
     if user is not None:
         fit = fit_similarity(template.vertices[user.template_index], user.points)
-        candidates = [Detection(replace(user, confidence=fit.weights, path="user", note="user landmarks file"), fit, len(user.points))]
+        candidates = [("user", Detection(replace(user, confidence=fit.weights, path="user", note="user landmarks file"), fit, len(user.points)))]
     else:
         candidates = _candidates(scan, template)
     failed = []
-    for found in candidates:
+    for label, found in candidates:
         check = check_face(scan, template, found.similarity, central)
         if check.is_face:
             break
-        failed.append(found.landmarks.path)
+        failed.append(label)
     require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture)
     rejected = f"the face found by {' and '.join(dict.fromkeys(failed))} failed the face check" if failed else ""
     return replace(found.landmarks, rejected=rejected), found.similarity, check
@@ -46,16 +48,20 @@ def landmark_free_alignment(scan: Scan, template: Template, rejected: str) -> tu
     return (replace(landmarks, rejected=rejected), fit, check) if check.is_face else None
 
 
-def _candidates(scan: Scan, template: Template) -> Iterator[Detection]:
-    """Alignments to try in turn (each computed only if the one before fails the face check)."""
-    detection = detect_landmarks(scan, template)
-    if detection is not None:
-        yield detection
+def _candidates(scan: Scan, template: Template) -> Iterator[tuple[str, Detection]]:
+    """(label, alignment) to try in turn (each computed only if the one before fails the face check)."""
+    looks = [(scan, "")]
+    if not (scan.is_capture or scan.is_point_cloud) and (scan.colors is not None or scan.texture is not None):
+        looks.append((replace(scan, colors=None, texture=None, uv=None), " without the scan's colours"))
+    for seen, without in looks:
+        det = detect_landmarks(seen, template)
+        if det is not None:
+            yield det.landmarks.path + without, Detection(replace(det.landmarks, note=det.landmarks.note + without), det.similarity, det.inliers)
     landmarks, fit = fallback_alignment(scan, template)
     front = None if scan.is_capture else detect_from_front(_renderable(scan, fit), template, fit)
     if front is not None:
-        yield front
-    yield Detection(landmarks, fit, len(landmarks.points))
+        yield front.landmarks.path, front
+    yield landmarks.path, Detection(landmarks, fit, len(landmarks.points))
 
 
 def _renderable(scan: Scan, pose: Similarity) -> Scan:

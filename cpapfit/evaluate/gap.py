@@ -9,10 +9,10 @@ from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from ..scan import Scan
-from .rim import skin_under, spacing
+from .rim import skin_under
 
 SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
-CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point is measured to its tangent plane
+CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point (or SPACINGS local spacings) is measured to its tangent plane
 NEAREST = 8  # scan points around a rim point: the scan's normal there; over its edge if any of them is
 NORMAL_REACH_MM = 10.0  # a mesh's skin under a rim point is looked for along the normal from this far out
 
@@ -49,10 +49,11 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
     under the flange, as `evaluate.rim` measures it (`skin_under`), along the scan's own normal
     there (the mean of the NEAREST points' normals, turned to agree with the (K, 3) unit skin
     `normals` of the registered face). Where no ray meets the mesh within NORMAL_REACH_MM, and for
-    a point cloud: to the tangent plane at the nearest point, if within CLOUD_REACH_MM (not the
-    gaps between the points)."""
+    a point cloud: to the tangent plane at the nearest point, if within CLOUD_REACH_MM or SPACINGS
+    times the points' spacing there (not the gaps between the points: a cloud of a decimated mesh's
+    vertices is sparse where the face is flat)."""
     tree = cKDTree(scan.vertices)
-    plane = off_skin(scan, tree, rim, max(CLOUD_REACH_MM, SPACINGS * spacing(tree)))
+    plane = off_skin(scan, tree, rim, np.maximum(CLOUD_REACH_MM, SPACINGS * local_spacing(tree, rim)))
     nearest = tree.query(rim, k=NEAREST)[1]
     covered = ~_edge(scan)[nearest].any(axis=1)
     if scan.is_point_cloud:
@@ -70,9 +71,17 @@ def _edge(scan: Scan) -> np.ndarray:
     return scan.rims if scan.is_point_cloud else scan.rims | (np.bincount(scan.faces.ravel(), minlength=len(scan.vertices)) == 0)
 
 
-def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float) -> np.ndarray:
+def local_spacing(tree: cKDTree, points: np.ndarray) -> np.ndarray:
+    """(K,) mm: the mean distance from the scan point nearest each of (K, 3) points to its NEAREST
+    nearest neighbours."""
+    nearest = tree.query(points)[1]
+    return tree.query(tree.data[nearest], k=NEAREST + 1)[0][:, 1:].mean(axis=1)
+
+
+def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float | np.ndarray) -> np.ndarray:
     """(K,) distance (mm) of points from the scan: to the tangent plane at the nearest scan point
-    when that is within `reach` (a coarse mesh's vertices are far apart), else to the point."""
+    when that is within `reach` (mm, one or (K,); a coarse mesh's vertices are far apart), else to
+    the point."""
     dist, idx = tree.query(points)
     plane = np.abs(np.einsum("ij,ij->i", points - scan.vertices[idx], scan.normals[idx]))
     return np.where(dist <= reach, plane, dist)

@@ -4,15 +4,18 @@ import numpy as np
 
 from ..errors import UnitsError
 
-MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
-UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "in": "inches"}
-AUTO_UNITS = ("mm", "cm", "m")  # a face in inches is a face in centimetres too: inches must be stated
+MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "um": 0.001, "in": 25.4}
+UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "um": "micrometres", "in": "inches"}
+# Micrometres: the Basel Face Model and scans fitted with it. A face in inches is a face in
+# centimetres too: inches must be stated.
+AUTO_UNITS = ("mm", "cm", "m", "um")
+UNIT_CHOICES = ("auto", *MM_PER_UNIT)  # what --units takes
 # Largest robust extent of a scan of a face (and at most the head), in mm.
 FACE_EXTENT_MM = (70.0, 600.0)
 # ... of a scan with more than the face in it (head, shoulders, chest), in mm: taken when stated, and
-# by auto in mm or m, where it cannot be mistaken for a face in another unit.
+# by auto in mm, m or um, where it cannot be mistaken for a face in another unit.
 BUST_EXTENT_MM = (600.0, 2000.0)
-BUST_UNITS = ("mm", "m")
+BUST_UNITS = ("mm", "m", "um")
 
 
 def robust_extent(vertices: np.ndarray) -> float:
@@ -38,12 +41,12 @@ def decide_units(vertices: np.ndarray, stated: str = "auto") -> tuple[str, str]:
     lo, hi = FACE_EXTENT_MM
     if stated != "auto":
         if stated not in MM_PER_UNIT:
-            raise UnitsError(f"unknown unit '{stated}': use mm, cm, m, in or auto")
+            raise UnitsError(f"unknown unit '{stated}': use {', '.join(UNIT_CHOICES)}")
         if not _fits(extent, stated, (lo, BUST_EXTENT_MM[1])):
             size = extent * MM_PER_UNIT[stated]
             raise UnitsError(
                 f"in {UNIT_NAMES[stated]} the scan is {size:.4g} mm across, but a face is {lo:.0f}-{hi:.0f} mm (with the "
-                f"shoulders up to {BUST_EXTENT_MM[1]:.0f}): check the unit (--units mm|cm|m|in) or use --units auto"
+                f"shoulders up to {BUST_EXTENT_MM[1]:.0f}): check the unit (--units {'|'.join(MM_PER_UNIT)}) or use --units auto"
             )
         return stated, f"units: {UNIT_NAMES[stated]} as stated ({extent * MM_PER_UNIT[stated]:.0f} mm across)"
     for unit in AUTO_UNITS:
@@ -58,5 +61,5 @@ def decide_units(vertices: np.ndarray, stated: str = "auto") -> tuple[str, str]:
                           "more than a face, e.g. head and shoulders)")
     raise UnitsError(
         f"the scan is {extent:.4g} units across, which is the size of a face ({lo:.0f}-{hi:.0f} mm, with the shoulders up to "
-        f"{BUST_EXTENT_MM[1]:.0f} mm) in none of mm, cm or m: is it a face scan? state the unit with --units (mm, cm, m, in)"
+        f"{BUST_EXTENT_MM[1]:.0f} mm) in none of mm, cm, m or um: is it a face scan? state the unit with --units ({', '.join(MM_PER_UNIT)})"
     )
