@@ -9,8 +9,10 @@ import numpy as np
 from .scan import Intrinsics
 
 # A triangle is dropped when its depth range exceeds what a surface at this grazing angle to the
-# viewing ray could produce across one pixel diagonal: a depth jump, not a surface.
-MAX_SURFACE_ANGLE_DEG = 85.0
+# viewing ray could produce across one pixel diagonal: a depth jump, not a surface. Depth cameras
+# see no surface beyond about 80 degrees of incidence (the synthetic sensor's returns stop there);
+# steeper triangles join an edge to what lies behind it, e.g. a nostril's wing to the cheek.
+MAX_SURFACE_ANGLE_DEG = 80.0
 
 
 def backproject(depth_mm: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
@@ -48,7 +50,7 @@ def grid_triangles(depth_mm: np.ndarray, valid: np.ndarray, intrinsics: Intrinsi
     Returns (pixel_vertex, faces): pixel_vertex (H, W) int64 maps each valid pixel to its vertex
     index (row-major order of valid pixels) and -1 elsewhere; faces (M, 3) int64, two per 2x2
     block of valid pixels, wound so normals face the camera. Triangles spanning a depth jump
-    (depth range > tan(85 deg) x one pixel diagonal's footprint) are left out.
+    (depth range > tan(80 deg) x one pixel diagonal's footprint) are left out.
     """
     pixel_vertex = np.full(depth_mm.shape, -1, dtype=np.int64)
     pixel_vertex[valid] = np.arange(int(valid.sum()))

@@ -262,6 +262,26 @@ def test_two_faces_are_refused(tmp_path):
         initial_alignment(load_scan(tmp_path), TEMPLATE)
 
 
+@pytest.mark.parametrize("turn,refused", [(2, False), (0, True)], ids=["upside-down", "upright"])
+def test_a_second_face_counts_only_where_the_face_is_found(phantom1_dir, monkeypatch, turn, refused):
+    """MediaPipe sometimes sees a second, phantom face in a face turned upside down (a real face
+    scan rendered from above). A second face beside the first in the image turned by 180 degrees
+    is not a second patient; beside the face found upright, it is."""
+    from cpapfit.landmarks import detect
+
+    def with_a_second_face(image):
+        found = detect_rotations(image)
+        return [(k, faces + [faces[0] + [0.7 * np.ptp(faces[0][:, 0]), 0.0]] if k == turn and faces else faces) for k, faces in found]
+
+    detect_rotations = detect.detect_rotations
+    monkeypatch.setattr(detect, "detect_rotations", with_a_second_face)
+    if refused:
+        with pytest.raises(InputError, match="two faces"):
+            initial_alignment(load_scan(phantom1_dir), TEMPLATE)
+    else:
+        assert initial_alignment(load_scan(phantom1_dir), TEMPLATE)[0].path == "image"
+
+
 def test_window_median_and_percentiles_equal_numpys_to_the_bit():
     """The vectorised window statistics of `lift` give np.nanmedian's and np.nanpercentile's numbers
     exactly, on windows with every count of valid pixels (all-NaN rows: NaN)."""

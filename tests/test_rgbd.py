@@ -32,6 +32,21 @@ def test_step_in_depth_is_not_triangulated_but_slopes_are():
     assert (np.einsum("ij,ij->i", normals, pts[faces[:, 0]]) < 0).all()  # facing the camera
 
 
+def test_a_small_jump_behind_an_edge_is_not_bridged_but_a_75_degree_slope_is_kept():
+    """At 450 mm one pixel is 0.75 mm across: a 7 mm step (the wing of a nostril in front of the
+    cheek) is an edge, not skin, while a surface at 75 degrees to the rays (2.8 mm deeper per pixel)
+    is skin."""
+    step = np.full((48, 64), 450.0)
+    step[:, 32:] = 457.0
+    valid = np.ones_like(step, dtype=bool)
+    cols = np.argwhere(valid)[:, 1]
+    faces = grid_triangles(step, valid, K)[1]
+    assert not ((cols[faces] < 32).any(axis=1) & (cols[faces] >= 32).any(axis=1)).any()
+    footprint = 450.0 / K.fx  # mm per pixel at 450 mm
+    slope = 450.0 + np.arange(64)[None, :] * footprint * np.tan(np.radians(75.0)) + np.zeros((48, 1))
+    assert len(grid_triangles(slope, valid, K)[1]) == 2 * 47 * 63
+
+
 def test_grid_boundary_equals_the_edge_definition():
     from cpapfit.rims import boundary_vertices
     from cpapfit.scan import Scan

@@ -94,17 +94,19 @@ def _as_found_by(det: Detection, path: str) -> Detection:
 
 def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True) -> Detection | None:
     """The detection with the least similarity RMS over the sights and image rotations, or None.
-    `one_face`: refuse sights showing two faces (a frontal render frames one face only: skipped)."""
-    best = None
+    `one_face`: refuse when the sight and rotation of that detection show two faces (only there: in
+    a face turned upside down MediaPipe can see a second, phantom face; a frontal render frames one
+    face only: skipped)."""
+    best, crowd = None, None
     normals = template.mesh().vertex_normals[:N_LANDMARKS]
     for sight in seen:
         for k, faces in detect_rotations(sight.image):
-            if one_face:
-                _refuse_two_faces(faces, sight)
             for uv in faces:
                 det = _evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg")
                 if det is not None and (best is None or det.similarity.rms_mm < best.similarity.rms_mm):
-                    best = det
+                    best, crowd = det, (faces, sight)
+    if one_face and crowd is not None:
+        _refuse_two_faces(*crowd)
     return best
 
 
