@@ -1,6 +1,6 @@
 """The stages strung together. Each stage is a pure function; this module only sequences them."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -34,6 +34,7 @@ STAGES = (
 )
 STRAY_MM = QualityParams().detected_spread_refuse_mm  # detected landmarks this far (median) from the registered face: dropped
 DOUBT_MM = QualityParams().cross_check_spread_mm  # ... this far: cross-checked against the face's shape alone
+APART_MM = QualityParams().shape_apart_drop_mm  # ... and their seal band this far (mean) from the shape's: dropped
 BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate", "report"}
 
 
@@ -91,14 +92,32 @@ def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registratio
     return _by_shape(scan, "; ".join(filter(None, (lm.rejected, why)))) or (alignment, reg)
 
 
-def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> np.ndarray | None:
-    """(n, 3) mm the template registered from the face's shape alone, when detected landmarks lie a
+def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> tuple[Alignment, Registration] | None:
+    """The template aligned and registered from the face's shape alone, when detected landmarks lie a
     median over DOUBT_MM (and at most STRAY_MM: else `registered` has tried it) from their places on
     the registered face, and the shape alone places it; else None."""
     if alignment.landmarks.path not in ("image", "render") or not DOUBT_MM < reg.landmark_spread_mm <= STRAY_MM:
         return None
-    by_shape = _by_shape(scan, "")
-    return None if by_shape is None else by_shape[1].vertices
+    return _by_shape(scan, "")
+
+
+def cross_checked(scan: Scan, alignment: Alignment, reg: Registration, mask: str) -> tuple[Alignment, Registration, np.ndarray | None]:
+    """Doubtful detected landmarks checked against the face's shape alone (`placed_by_shape`):
+    (alignment, registration, the shape's registered vertices (n, 3) mm or None) for the quality
+    gates to compare. When the two place the mask's seal band over APART_MM apart (mean; fran, whose
+    landmarks are right, reads up to 7.5), the landmarks have dragged the template off the face and
+    are dropped: the shape's alignment and registration are returned, with nothing to compare."""
+    shape = placed_by_shape(scan, alignment, reg)
+    if shape is None:
+        return alignment, reg, None
+    band = load_template().regions[mask].band
+    apart = float(np.linalg.norm(reg.vertices[band] - shape[1].vertices[band], axis=1).mean())
+    if apart <= APART_MM:
+        return alignment, reg, shape[1].vertices
+    lm = alignment.landmarks
+    why = f"the landmarks found by {lm.path} placed the {mask} seal region a mean {apart:.1f} mm from where the face's shape alone places it"
+    kept = replace(shape[0], landmarks=replace(shape[0].landmarks, rejected="; ".join(filter(None, (lm.rejected, why)))))
+    return kept, shape[1], None
 
 
 def _by_shape(scan: Scan, rejected: str) -> tuple[Alignment, Registration] | None:
@@ -150,7 +169,7 @@ def design(
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
     al, reg = registered(scan, al)
-    by_shape = placed_by_shape(scan, al, reg)  # doubtful landmarks: where the shape alone puts the template
+    al, reg, by_shape = cross_checked(scan, al, reg, mask)  # doubtful landmarks: where the shape alone puts the template
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)

@@ -27,7 +27,10 @@ Measured once the template is registered and the seal carried over (all mm):
   error are doubtful; the template is then also placed by the face's shape alone and registered
   (`pipeline.placed_by_shape`), and the two seal bands compared. Neither can be told right from
   the geometry (a slide along the skin fits as well), so past the flag threshold the design is
-  flagged; never refused (on fran the shape alone is the one that errs);
+  flagged; never refused (on fran the shape alone is the one that errs: 2.8-7.5 mm apart with its
+  landmarks right). Past `shape_apart_drop_mm` the landmarks have dragged the template off the
+  face (a bare mesh's shaded render: 12-23 mm) and are dropped for the shape
+  (`pipeline.cross_checked`), flagged landmark-free;
 - face size and depth ratio (`proportions.py`): the registered face's size, and its depth for its
   breadth, against the template's (an adult's). A scale or units misstated makes the face, and the
   mask, that much too small or large; a focal length misstated by k makes it k times too deep for
@@ -80,7 +83,7 @@ class QualityParams:
         the face's shape alone: the detector's own error gives 2-5 mm on captures (one synthetic
         subject of 50 at 5.08), fran 4.4-4.8, bare meshes 3.4-6.3.
     shape_apart_*_mm: mean distance (mm) between the seal bands the landmarks and the shape alone
-        place (bad above; never refused).
+        place (bad above; never refused); past shape_apart_drop_mm the landmarks are dropped.
     rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
         median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
         it by construction (<= 0.6 mm), unless the template missed the face there.
@@ -116,6 +119,7 @@ class QualityParams:
     cross_check_spread_mm: float = 5.0
     shape_apart_flag_mm: float = 2.0
     shape_apart_refuse_mm: float = np.inf
+    shape_apart_drop_mm: float = 10.0
     rim_gap_flag_mm: float = 1.0
     rim_gap_refuse_mm: float = 3.0
     small_face_flag: float = 0.8

@@ -458,27 +458,48 @@ def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, p
     assert kept is stray and reg.landmark_spread_mm > pipeline.STRAY_MM  # kept, for the quality gates to refuse
 
 
-def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
-    """Synthetic subject 9 (turned 19 deg, pitched 23 deg) as a bare mesh, turned at random:
-    MediaPipe on its shaded render finds landmarks whose spread (6.3 mm) is under the 7 mm flag, and
-    they drag the oronasal seal region 3 mm along the skin, where the geometry cannot pull it back:
-    this design was made unflagged. Past 5 mm of spread the template is also placed by the shape
-    alone, here within 1 mm of the truth; the two seal regions lie over 2 mm apart: flagged."""
-    from cpapfit.pipeline import align, design, placed_by_shape, registered
-
+def subject_9_bare(tmp_path, turned: int):
+    """Synthetic subject 9 (turned 19 deg, pitched 23 deg) as a bare mesh turned by
+    `Rotation.random(turned)`, its normals facing out of the face; and the true surface."""
     ph = make_phantom(9)
     write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
     capture = load_scan(tmp_path / "capture")
-    turn = Rotation.random(random_state=9).as_matrix()
-    scan = Scan(capture.vertices @ turn.T, capture.faces, capture.normals @ turn.T)  # its normals facing out of the face
-    truth, band = ph.surface @ turn.T, TEMPLATE.regions["oronasal"].band
+    turn = Rotation.random(random_state=turned).as_matrix()
+    return Scan(capture.vertices @ turn.T, capture.faces, capture.normals @ turn.T), ph.surface @ turn.T
+
+
+def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
+    """MediaPipe on the shaded render of subject 9's bare mesh finds landmarks whose spread (5.8 mm)
+    is under the 7 mm flag, and they drag the oronasal seal region over 2 mm along the skin, where
+    the geometry cannot pull it back: this design was made unflagged. Past 5 mm of spread the
+    template is also placed by the shape alone, here within 1 mm of the truth; the two seal regions
+    lie over 2 mm apart: flagged."""
+    from cpapfit.pipeline import align, design, placed_by_shape, registered
+
+    scan, truth = subject_9_bare(tmp_path, 17)
+    band = TEMPLATE.regions["oronasal"].band
     al, reg = registered(scan, align(scan))
     by_shape = placed_by_shape(scan, al, reg)
     assert al.landmarks.path == "render" and 5.0 < reg.landmark_spread_mm < 7.0 and by_shape is not None
     assert np.linalg.norm(reg.vertices[band] - truth[band], axis=1).mean() > 2.0
-    assert np.linalg.norm(by_shape[band] - truth[band], axis=1).mean() < 1.0
+    assert np.linalg.norm(by_shape[1].vertices[band] - truth[band], axis=1).mean() < 1.0
     gates = {g.code: g for g in design(scan, "oronasal").quality.gates}
     assert gates["shape_apart_mm"].flag and not gates["landmark_spread_mm"].flag
+
+
+def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape(tmp_path):
+    """Turned another way, subject 9's render gives landmarks (spread 6.5 mm) that put the oronasal
+    seal region 12.6 mm from the truth, the shape alone 1.0 mm: over 10 mm apart, the design takes
+    the shape's placement, flagged landmark-free and saying why."""
+    from cpapfit.pipeline import design
+
+    scan, truth = subject_9_bare(tmp_path, 12)
+    band = TEMPLATE.regions["oronasal"].band
+    d = design(scan, "oronasal")
+    assert d.alignment.landmarks.path == "fallback"
+    assert np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean() < 1.2
+    (gate,) = [g for g in d.quality.flags if g.code == "landmark_free"]
+    assert "placed the oronasal seal region a mean" in gate.message and "from where the face's shape alone places it" in gate.message
 
 
 def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, tmp_path, monkeypatch, cli):
