@@ -37,7 +37,7 @@ def main() -> None:
     args = ap.parse_args()
     original = load_scan(args.scan)
     reference = design(original, args.mask).contact.curve
-    mesh = trimesh.load(args.scan, process=False)
+    mesh = trimesh.load(args.scan, force="mesh", process=False)
     mesh.vertices = mesh.vertices * (MM_PER_UNIT[original.units] / 1000.0)  # metres
     print("| case | unit | format | seal vs original: mean | max (mm) | rim gap max (mm) | leak (L/min) | window |")
     print("|---|---|---|---|---|---|---|---|")

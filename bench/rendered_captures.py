@@ -73,8 +73,9 @@ def main() -> None:
         apart = cKDTree(seal).query(own.contact.curve)[0]
         on_skin = trimesh.proximity.closest_point(skin, seal)[1]
         gates = {g.code: g.value for g in d.quality.gates}
+        rim = d.rim.summary()["rim_gap_max_mm"]
         print(f"| {yaw:g} | {pitch:g} | {apart.mean():.2f} | {apart.max():.2f} | {np.median(on_skin):.2f} | {on_skin.max():.2f} | "
-              f"{d.rim.summary()['rim_gap_max_mm']:.2f} | {gates['coverage']:.2f} | {gates['hole_mm']:.0f} | "
+              f"{'-' if rim is None else f'{rim:.2f}'} | {gates['coverage']:.2f} | {gates['hole_mm']:.0f} | "
               f"{' '.join(g.code for g in d.quality.flags)} |", flush=True)
 
 

@@ -6,4 +6,4 @@ import os
 # arrays are small, and OpenBLAS's idle threads spin, which cost a design ~1.5 s of CPU on 2 cores.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

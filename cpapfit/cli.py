@@ -87,7 +87,7 @@ def registration_summary(reg) -> str:
 
 def cmd_register(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
-    al, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
+    al, reg, _ = registered(scan, align(scan, load_user_landmarks(args, scan)))
     write_bytes(Path(args.out), registration_ply(reg))
     info(f"{scan.units_note}; {found_by(al.landmarks)}; {registration_summary(reg)} -> {args.out}")
     return 0
@@ -146,7 +146,7 @@ def cmd_evaluate(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
     cushion = load_cushion(Path(args.cushion))
     params = FitParams(cpap_cmh2o=args.cpap)
-    al, reg = registered(scan, align(scan, load_user_landmarks(args, scan)))
+    al, reg, _ = registered(scan, align(scan, load_user_landmarks(args, scan)))
     fits = evaluate(face_for(scan, al, reg), al, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
@@ -224,7 +224,7 @@ def load_user_landmarks(args, scan: Scan):
 def cmd_landmarks(args) -> int:
     """The landmarks and similarity a design would use (detected ones far from the registered face dropped)."""
     scan = load_scan(Path(args.scan), args.units)
-    al, _ = registered(scan, align(scan, load_user_landmarks(args, scan)))
+    al, *_ = registered(scan, align(scan, load_user_landmarks(args, scan)))
     fit = al.similarity
     record = landmarks_record(al.landmarks) | {
         "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),

@@ -23,6 +23,7 @@ from .proportions import proportions
 from .quality import Quality, QualityParams, assess, require_quality
 from .align.similarity import Similarity
 from .landmarks.types import Landmarks
+from .metrics import mask_region
 from .scan import Scan, scan_surface
 from .template import load_template
 from .work import at_once
@@ -80,16 +81,19 @@ def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams =
     return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params)
 
 
-def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration]:
-    """Stage nonrigid, and the alignment it kept. Detected landmarks lying a median over STRAY_MM from
-    their places on the registered face (a colour image not registered to its depth: the quality
-    gates would refuse them) are dropped for the landmark-free alignment, if that passes the face check."""
+def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration, np.ndarray | None]:
+    """Stage nonrigid: the alignment it kept, its registration, and, when detected landmarks are
+    doubtful, the template registered from the face's shape alone ((n, 3) mm) for the quality gates
+    to compare (else None). Detected landmarks are dropped for the landmark-free alignment, if that
+    passes the face check, when they lie a median over STRAY_MM from their places on the registered
+    face (a colour image not registered to its depth: the quality gates would refuse them), or when,
+    doubtful, they place the mask region over APART_MM from the shape's (`_cross_checked`)."""
     reg = register_template(scan, alignment)
     lm = alignment.landmarks
     if lm.path == "user" or not reg.landmark_spread_mm > STRAY_MM:
-        return alignment, reg
+        return _cross_checked(scan, alignment, reg)
     why = f"the landmarks found by {lm.path} lay a median {reg.landmark_spread_mm:.1f} mm from their places on the registered face"
-    return _by_shape(scan, "; ".join(filter(None, (lm.rejected, why)))) or (alignment, reg)
+    return *(_by_shape(scan, "; ".join(filter(None, (lm.rejected, why)))) or (alignment, reg)), None
 
 
 def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> tuple[Alignment, Registration] | None:
@@ -101,23 +105,21 @@ def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> tupl
     return _by_shape(scan, "")
 
 
-def cross_checked(scan: Scan, alignment: Alignment, reg: Registration, mask: str) -> tuple[Alignment, Registration, np.ndarray | None]:
-    """Doubtful detected landmarks checked against the face's shape alone (`placed_by_shape`):
-    (alignment, registration, the shape's registered vertices (n, 3) mm or None) for the quality
-    gates to compare. When the two place the mask's seal band over APART_MM apart (mean; fran, whose
+def _cross_checked(scan: Scan, alignment: Alignment, reg: Registration) -> tuple[Alignment, Registration, np.ndarray | None]:
+    """Doubtful detected landmarks checked against the face's shape alone (`placed_by_shape`). When
+    the two place the mask region (both masks' seal bands) over APART_MM apart (mean; fran, whose
     landmarks are right, reads up to 7.5), the landmarks have dragged the template off the face and
-    are dropped: the shape's alignment and registration are returned, with nothing to compare."""
+    are dropped for the shape's alignment and registration, with nothing left to compare."""
     shape = placed_by_shape(scan, alignment, reg)
     if shape is None:
         return alignment, reg, None
-    band = load_template().regions[mask].band
-    apart = float(np.linalg.norm(reg.vertices[band] - shape[1].vertices[band], axis=1).mean())
+    region = mask_region(load_template())
+    apart = float(np.linalg.norm(reg.vertices[region] - shape[1].vertices[region], axis=1).mean())
     if apart <= APART_MM:
         return alignment, reg, shape[1].vertices
     lm = alignment.landmarks
-    why = f"the landmarks found by {lm.path} placed the {mask} seal region a mean {apart:.1f} mm from where the face's shape alone places it"
-    kept = replace(shape[0], landmarks=replace(shape[0].landmarks, rejected="; ".join(filter(None, (lm.rejected, why)))))
-    return kept, shape[1], None
+    why = f"the landmarks found by {lm.path} placed the mask region a mean {apart:.1f} mm from where the face's shape alone places it"
+    return replace(shape[0], landmarks=replace(shape[0].landmarks, rejected="; ".join(filter(None, (lm.rejected, why))))), shape[1], None
 
 
 def _by_shape(scan: Scan, rejected: str) -> tuple[Alignment, Registration] | None:
@@ -168,8 +170,7 @@ def design(
     on_stage("landmarks and similarity")
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
-    al, reg = registered(scan, al)
-    al, reg, by_shape = cross_checked(scan, al, reg, mask)  # doubtful landmarks: where the shape alone puts the template
+    al, reg, by_shape = registered(scan, al)  # by_shape: doubtful landmarks' check, where the shape alone puts the template
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)

@@ -30,7 +30,7 @@ Measured once the template is registered and the seal carried over (all mm):
   flagged; never refused (on fran the shape alone is the one that errs: 2.8-7.5 mm apart with its
   landmarks right). Past `shape_apart_drop_mm` the landmarks have dragged the template off the
   face (a bare mesh's shaded render: 12-23 mm) and are dropped for the shape
-  (`pipeline.cross_checked`), flagged landmark-free;
+  (`pipeline.registered`), flagged landmark-free;
 - face size and depth ratio (`proportions.py`): the registered face's size, and its depth for its
   breadth, against the template's (an adult's). A scale or units misstated makes the face, and the
   mask, that much too small or large; a focal length misstated by k makes it k times too deep for

@@ -18,7 +18,8 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
 
     User landmarks override detection. Otherwise the first of these that lies on a face wins: the
     detection; for a mesh with colours, the detection on its renders without them (a texture
-    misplaced on the surface, or colours that are not skin, mislead the detector); a detection on a
+    misplaced on the surface, or colours that are not skin, mislead the detector: when the coloured
+    renders show no face, or one that fails the face check); a detection on a
     render from in front of the face the landmark-free fallback finds (meshes, and point clouds
     through a surface over their points: a capture's own image is the best view there is); the
     fallback itself. The winner's `rejected` names those that failed the face
@@ -56,7 +57,8 @@ def _candidates(scan: Scan, template: Template) -> Iterator[tuple[str, Detection
     for seen, without in looks:
         det = detect_landmarks(seen, template)
         if det is not None:
-            yield det.landmarks.path + without, Detection(replace(det.landmarks, note=det.landmarks.note + without), det.similarity, det.inliers)
+            note = det.landmarks.note + (f"; on renders{without}" if without else "")
+            yield det.landmarks.path + without, Detection(replace(det.landmarks, note=note), det.similarity, det.inliers)
     landmarks, fit = fallback_alignment(scan, template)
     front = None if scan.is_capture else detect_from_front(_renderable(scan, fit), template, fit)
     if front is not None:

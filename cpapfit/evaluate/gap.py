@@ -50,10 +50,10 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray, scan: Scan, surface: trimesh.T
     there (the mean of the NEAREST points' normals, turned to agree with the (K, 3) unit skin
     `normals` of the registered face). Where no ray meets the mesh within NORMAL_REACH_MM, and for
     a point cloud: to the tangent plane at the nearest point, if within CLOUD_REACH_MM or SPACINGS
-    times the points' spacing there (not the gaps between the points: a cloud of a decimated mesh's
-    vertices is sparse where the face is flat)."""
+    times the points' spacing there, at most NORMAL_REACH_MM (not the gaps between the points: a
+    cloud of a decimated mesh's vertices is sparse where the face is flat)."""
     tree = cKDTree(scan.vertices)
-    plane = off_skin(scan, tree, rim, np.maximum(CLOUD_REACH_MM, SPACINGS * local_spacing(tree, rim)))
+    plane = off_skin(scan, tree, rim, np.clip(SPACINGS * local_spacing(tree, rim), CLOUD_REACH_MM, NORMAL_REACH_MM))
     nearest = tree.query(rim, k=NEAREST)[1]
     covered = ~_edge(scan)[nearest].any(axis=1)
     if scan.is_point_cloud:
@@ -73,7 +73,7 @@ def _edge(scan: Scan) -> np.ndarray:
 
 def local_spacing(tree: cKDTree, points: np.ndarray) -> np.ndarray:
     """(K,) mm: the mean distance from the scan point nearest each of (K, 3) points to its NEAREST
-    nearest neighbours."""
+    nearest neighbours (on an even cloud about 1.3 times the nearest-neighbour spacing)."""
     nearest = tree.query(points)[1]
     return tree.query(tree.data[nearest], k=NEAREST + 1)[0][:, 1:].mean(axis=1)
 
