@@ -458,10 +458,10 @@ def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, p
     assert kept is stray and reg.landmark_spread_mm > pipeline.STRAY_MM  # kept, for the quality gates to refuse
 
 
-def subject_9_bare(tmp_path, turned: int):
-    """Synthetic subject 9 (turned 19 deg, pitched 23 deg) as a bare mesh turned by
-    `Rotation.random(turned)`, its normals facing out of the face; and the true surface."""
-    ph = make_phantom(9)
+def bare_subject(tmp_path, seed: int, turned: int):
+    """A synthetic subject's capture as a bare mesh turned by `Rotation.random(turned)`, its
+    normals facing out of the face; and the true surface."""
+    ph = make_phantom(seed)
     write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
     capture = load_scan(tmp_path / "capture")
     turn = Rotation.random(random_state=turned).as_matrix()
@@ -476,7 +476,7 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
     lie over 2 mm apart: flagged."""
     from cpapfit.pipeline import align, design, registered
 
-    scan, truth = subject_9_bare(tmp_path, 17)
+    scan, truth = bare_subject(tmp_path, 9, 17)  # turned 19 deg, pitched 23 deg
     band = TEMPLATE.regions["oronasal"].band
     al, reg, by_shape = registered(scan, align(scan))
     assert al.landmarks.path == "render" and 5.0 < reg.landmark_spread_mm < 7.0 and by_shape is not None
@@ -487,20 +487,20 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
 
 
 def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape(tmp_path):
-    """Turned another way, subject 9's render gives landmarks (spread 6.5 mm) that put the oronasal
-    seal region 12.6 mm from the truth, the shape alone 1.0 mm: over 10 mm apart, the design (and
-    the landmarks command, which writes what a design uses) takes the shape's placement, flagged
-    landmark-free and saying why."""
+    """Turned another way, subject 9's render gives landmarks (spread 8.8 mm) that put the oronasal
+    seal region 23 mm from the truth, the shape alone 1.2 mm: over 10 mm apart (21 mm over the mask
+    region), the design (and the landmarks command, which writes what a design uses) takes the
+    shape's placement, flagged landmark-free and saying why."""
     from cpapfit.pipeline import align, design, registered
 
-    scan, truth = subject_9_bare(tmp_path, 12)
+    scan, truth = bare_subject(tmp_path, 9, 0)
     band = TEMPLATE.regions["oronasal"].band
     al, _, by_shape = registered(scan, align(scan))
     assert al.landmarks.path == "fallback" and by_shape is None
     assert "placed the mask region a mean" in al.landmarks.rejected
     d = design(scan, "oronasal")
     assert d.alignment.landmarks.path == "fallback"
-    assert np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean() < 1.2
+    assert np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean() < 1.5
     (gate,) = [g for g in d.quality.flags if g.code == "landmark_free"]
     assert "from where the face's shape alone places it" in gate.message
 
@@ -521,3 +521,14 @@ def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, 
     code, _, err = cli("landmarks", phantom1_dir, "--out", tmp_path / "lm.json")
     record = json.loads((tmp_path / "lm.json").read_text())
     assert code == 0 and record["path"] == "fallback" and "from their places on the registered face" in record["rejected"], err
+
+
+def test_a_face_found_from_the_fallbacks_pose_must_be_that_faces_size(tmp_path):
+    """Synthetic subject 2 as a bare mesh: its axis renders' face fails the face check; rendered from
+    the landmark-free alignment's pose (scale 0.96), MediaPipe "finds" a face at 0.72 that passes the
+    face check but puts the template 15 mm off. A face found there must be the fallback's face at its
+    size (within 15 %): the fallback itself is taken, within 1 mm of the truth."""
+    scan, truth = bare_subject(tmp_path, 2, 2)
+    lm, fit, check = initial_alignment(scan, TEMPLATE)
+    assert lm.path == "fallback" and check.is_face
+    assert region_error(fit, truth, make_phantom(2).faces) <= 3.0

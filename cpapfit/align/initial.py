@@ -13,6 +13,12 @@ from .check import FaceCheck, check_face, require_face
 from .similarity import Similarity, fit_similarity
 
 
+# A face found on renders framed by the landmark-free alignment's pose is the face that alignment
+# found: its size within this factor of it (48 synthetic meshes and clouds: 0.91-1.10; a bare
+# mesh's shaded render once gave a "face" at 0.75 that passed the face check, 15 mm off).
+FRONT_SIZE = 1.15
+
+
 def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
     """Landmarks, the similarity carrying the template onto the scan, and the face check.
 
@@ -20,9 +26,9 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     detection; for a mesh with colours, the detection on its renders without them (a texture
     misplaced on the surface, or colours that are not skin, mislead the detector: when the coloured
     renders show no face, or one that fails the face check); a detection on a
-    render from in front of the face the landmark-free fallback finds (meshes, and point clouds
-    through a surface over their points: a capture's own image is the best view there is); the
-    fallback itself. The winner's `rejected` names those that failed the face
+    render from in front of the face the landmark-free fallback finds, if of that face's size
+    (meshes, and point clouds through a surface over their points: a capture's own image is the
+    best view there is); the fallback itself. The winner's `rejected` names those that failed the face
     check (a capture's colour image not registered to its depth puts the detected face off the
     scanned one). If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
@@ -61,7 +67,7 @@ def _candidates(scan: Scan, template: Template) -> Iterator[tuple[str, Detection
             yield det.landmarks.path + without, Detection(replace(det.landmarks, note=note), det.similarity, det.inliers)
     landmarks, fit = fallback_alignment(scan, template)
     front = None if scan.is_capture else detect_from_front(_renderable(scan, fit), template, fit)
-    if front is not None:
+    if front is not None and 1.0 / FRONT_SIZE <= front.similarity.scale / fit.scale <= FRONT_SIZE:
         yield front.landmarks.path, front
     yield landmarks.path, Detection(landmarks, fit, len(landmarks.points))
 
