@@ -527,7 +527,7 @@ def test_a_face_found_from_the_fallbacks_pose_must_be_that_faces_size(tmp_path):
     """Synthetic subject 2 as a bare mesh: its axis renders' face fails the face check; rendered from
     the landmark-free alignment's pose (scale 0.96), MediaPipe "finds" a face at 0.72 that passes the
     face check but puts the template 15 mm off. A face found there must be the fallback's face at its
-    size (within 15 %): the fallback itself is taken, within 1 mm of the truth."""
+    size (within 25 %): the fallback itself is taken, within 1 mm of the truth."""
     scan, truth = bare_subject(tmp_path, 2, 2)
     lm, fit, check = initial_alignment(scan, TEMPLATE)
     assert lm.path == "fallback" and check.is_face

@@ -14,9 +14,10 @@ from .similarity import Similarity, fit_similarity
 
 
 # A face found on renders framed by the landmark-free alignment's pose is the face that alignment
-# found: its size within this factor of it (48 synthetic meshes and clouds: 0.91-1.10; a bare
-# mesh's shaded render once gave a "face" at 0.75 that passed the face check, 15 mm off).
-FRONT_SIZE = 1.15
+# found: its size within this factor of it (48 synthetic meshes and clouds: 0.91-1.10; fran as a
+# bare STL, whose shape alone overstates its size: 0.86; a bare mesh's shaded render once gave a
+# "face" at 0.75 that passed the face check, 15 mm off).
+FRONT_SIZE = 1.25
 
 
 def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
