@@ -127,16 +127,22 @@ def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray, re
     return clearance, hits, cos
 
 
+def across(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two (K, 3) unit directions across (K, 3) unit axes, square to each other and to them."""
+    side = np.cross(axes, np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    return side, np.cross(axes, side)
+
+
 def skin_under(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float = REACH_MM) -> np.ndarray:
     """(K,) clearance (mm) of (K, 3) points over the skin under a flange resting there: the median of
     the first hits of rays down the unit axes ((3,), or (K, 3) one per point) from the point and
     PROBE_RAYS points PROBE_MM around it (not one stray triangle at a scan's torn edge, nor one
     noisy sample); NaN where the centre ray misses."""
     axes = np.broadcast_to(axes, points.shape)
-    side = np.cross(axes, np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    side, other = across(axes)
     turn = np.linspace(0.0, 2 * np.pi, PROBE_RAYS, endpoint=False)[:, None, None]
-    ring = PROBE_MM * (np.cos(turn) * side + np.sin(turn) * np.cross(axes, side))
+    ring = PROBE_MM * (np.cos(turn) * side + np.sin(turn) * other)
     probes = points[None] + np.vstack([np.zeros((1,) + points.shape), ring])
     heights = _look_down(probes.reshape(-1, 3), mesh, np.tile(axes, (len(probes), 1)), reach)[0].reshape(len(probes), -1)
     clearance = np.full(len(points), np.nan)
