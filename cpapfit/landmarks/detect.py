@@ -9,6 +9,7 @@ a detection there replaces it (an axis view of a scan in an arbitrary orientatio
 obliquely, and MediaPipe's landmarks on an oblique face are off by millimetres).
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -30,6 +31,7 @@ MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the 
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
 FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
 TWO_FACES_APART = 0.5  # two detections whose centres are farther apart than this x face size are two faces
+RENDER_THREADS = 2  # a mesh's axis views are rendered this many at a time (Embree and numpy release the GIL)
 
 
 @dataclass(frozen=True)
@@ -56,11 +58,11 @@ def sights(scan: Scan) -> list[Sight]:
         return [] if scan.image is None else [Sight(scan.image, scan.depth, scan.intrinsics, lambda p: p, "colour image")]
     if scan.is_point_cloud:
         return []
-    out, scene = [], scene_of(scan.vertices, scan.faces)
-    for i, view in enumerate(axis_views(scan)):
-        image, depth = render_view(scan, view, scene)
-        out.append(Sight(image, depth, view.intrinsics, view.to_scan, f"render view {i}"))
-    return out
+    scene, views = scene_of(scan.vertices, scan.faces), axis_views(scan)
+    with ThreadPoolExecutor(RENDER_THREADS) as pool:
+        renders = pool.map(lambda view: render_view(scan, view, scene), views)
+        return [Sight(image, depth, view.intrinsics, view.to_scan, f"render view {i}")
+                for i, (view, (image, depth)) in enumerate(zip(views, renders))]
 
 
 def detect_landmarks(scan: Scan, template: Template) -> Detection | None:
