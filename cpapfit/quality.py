@@ -60,7 +60,7 @@ from .errors import QualityError
 from .evaluate.gap import SPACINGS, RimGap, off_skin
 from .evaluate.rim import spacing
 from .in_front import IN_FRONT_MM, in_front_area_mm2
-from .landmarks.types import Landmarks
+from .landmarks.types import WITHOUT_COLOURS, Landmarks
 from .proportions import Proportions
 from .scan import Scan
 from .template import load_template
@@ -231,15 +231,15 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
                            f"the {landmarks.path} landmarks lie a median {off:.1f} mm off the scanned skin",
                            "they disagree with the geometry: check the landmarks file, or rescan"))
         if np.isfinite(registration.landmark_spread_mm):
-            gates.append(_spread_gate(scan, landmarks.path, registration.landmark_spread_mm, p))
+            gates.append(_spread_gate(scan, landmarks, registration.landmark_spread_mm, p))
         if by_shape is not None:
             apart = float(np.linalg.norm(registration.vertices[band] - by_shape[band], axis=1).mean())
             gates.append(_gate("shape_apart_mm", apart, (p.shape_apart_flag_mm, p.shape_apart_refuse_mm),
                                f"the {mask} seal region the {landmarks.path} landmarks placed lies a mean {apart:.1f} mm from where "
                                "the face's shape alone places it, and the geometry cannot tell which is right",
-                               f"check the landmarks picture ({_image_cause(scan)}), or give landmarks with --landmarks"))
+                               f"check the landmarks picture ({_image_cause(scan, landmarks.note)}), or give landmarks with --landmarks"))
     else:
-        why, cause = (landmarks.rejected, _image_cause(scan)) if landmarks.rejected else ("no face was detected", _no_face_cause(scan))
+        why, cause = (landmarks.rejected, _image_cause(scan, landmarks.rejected)) if landmarks.rejected else ("no face was detected", _no_face_cause(scan))
         gates.append(Gate("landmark_free", 1.0, True, False, f"{why}, so the template was placed by the face's shape alone, which on a "
                           f"real face can put the seal a few mm from where landmarks put it; check the landmarks picture ({cause}), "
                           "or give landmarks with --landmarks"))
@@ -278,11 +278,13 @@ def _shape_gates(scan: Scan, shape: Proportions, p: QualityParams) -> list[Gate]
     return [g for g in gates if np.isfinite(g.value)]
 
 
-def _image_cause(scan: Scan) -> str:
-    """Why an image's face may disagree with a scan's geometry, in words."""
+def _image_cause(scan: Scan, found: str) -> str:
+    """Why an image's face may disagree with a scan's geometry, in words; `found`: how that face was
+    found (a `Landmarks` note, or what was rejected: a face found on renders drawn WITHOUT_COLOURS
+    was not misled by them)."""
     if scan.is_capture:
         return "the colour image may not line up with the depth (register it to the depth image)"
-    if scan.colors is not None or scan.texture is not None:
+    if (scan.colors is not None or scan.texture is not None) and WITHOUT_COLOURS not in found:
         return "the scan's colours may be misplaced on its surface, or the render may have misled the detector"
     return "the shaded render may have misled the detector"
 
@@ -294,15 +296,16 @@ def _no_face_cause(scan: Scan) -> str:
     return "the detector found no face on the scan's render"
 
 
-def _spread_gate(scan: Scan, path: str, spread: float, p: QualityParams) -> Gate:
+def _spread_gate(scan: Scan, landmarks: Landmarks, spread: float, p: QualityParams) -> Gate:
     """The landmarks' median distance (mm) from their places on the face the geometry gives: a
     user's file against its trust, detected landmarks against the detector's own error."""
+    path = landmarks.path
     if path == "user":
         limits, whose = (p.landmark_spread_flag_mm, p.landmark_spread_refuse_mm), "the landmarks file's points"
         advice = "they pulled only as hard as detected landmarks: check the file (indices, frame), or leave it out"
     else:
         limits, whose = (p.detected_spread_flag_mm, p.detected_spread_refuse_mm), f"the landmarks detected on the {path}"
-        advice = f"{_image_cause(scan)}: rescan, or give landmarks with --landmarks"
+        advice = f"{_image_cause(scan, landmarks.note)}: rescan, or give landmarks with --landmarks"
     return _gate("landmark_spread_mm", spread, limits,
                  f"{whose} lie a median {spread:.1f} mm from their places on the face the scan's geometry gives", advice)
 

@@ -280,3 +280,19 @@ def test_the_command_with_its_worker_process_gives_the_same_bytes(twice, phantom
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in out.iterdir())
     for p in out.iterdir():
         assert (tmp_path / p.name).read_bytes() == p.read_bytes(), p.name
+
+
+def test_the_advice_blames_a_meshs_colours_only_when_the_landmarks_were_found_on_them():
+    """Detected landmarks far from the geometry on a coloured mesh: found on its coloured renders,
+    the advice names the colours; found on its renders drawn without them, the shaded render."""
+    from cpapfit.landmarks.types import WITHOUT_COLOURS, Landmarks
+    from cpapfit.quality import _spread_gate
+    from cpapfit.scan import Scan
+
+    box = trimesh.creation.box((100, 100, 100))
+    scan = Scan(box.vertices, box.faces, box.vertex_normals, colors=np.full((len(box.vertices), 3), 200, dtype=np.uint8))
+    found = Landmarks(np.zeros((3, 3)), np.arange(3), np.ones(3), "render", note="render view 0, rotation 0 deg")
+    coloured = _spread_gate(scan, found, 12.0, QualityParams())
+    bare = _spread_gate(scan, dataclasses.replace(found, note=found.note + "; on renders" + WITHOUT_COLOURS), 12.0, QualityParams())
+    assert coloured.flag and "colours may be misplaced" in coloured.message
+    assert bare.flag and "colours" not in bare.message and "shaded render" in bare.message

@@ -8,7 +8,7 @@ from ..template import Template, central_face
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
 from ..landmarks.cloud import facing_surface
 from ..landmarks.fallback import fallback_alignment
-from ..landmarks.types import Landmarks
+from ..landmarks.types import WITHOUT_COLOURS, Landmarks
 from .check import FaceCheck, check_face, require_face
 from .similarity import Similarity, fit_similarity
 
@@ -60,7 +60,7 @@ def _candidates(scan: Scan, template: Template) -> Iterator[tuple[str, Detection
     """(label, alignment) to try in turn (each computed only if the one before fails the face check)."""
     looks = [(scan, "")]
     if not (scan.is_capture or scan.is_point_cloud) and (scan.colors is not None or scan.texture is not None):
-        looks.append((replace(scan, colors=None, texture=None, uv=None), " without the scan's colours"))
+        looks.append((replace(scan, colors=None, texture=None, uv=None), WITHOUT_COLOURS))
     for seen, without in looks:
         det = detect_landmarks(seen, template)
         if det is not None:

@@ -8,6 +8,8 @@ from ..frozen import freeze_arrays
 
 PATHS = ("image", "render", "fallback", "user")
 
+WITHOUT_COLOURS = " without the scan's colours"  # said of renders of a coloured mesh drawn without its colours
+
 
 @dataclass(frozen=True)
 class Landmarks:
