@@ -1,6 +1,8 @@
 """Rims of a scan: the points on its edge and on the edges of its holes.
 
-A mesh's rims are the vertices of edges used by one triangle only. A depth image's are the pixels
+A mesh's rims are the vertices of edges used by one triangle only, vertices at one position counted
+as one (a textured mesh repeats a vertex on each side of a seam of its texture map: a seam is no
+rim; one real head scan had half its rim vertices on seams across the face). A depth image's are the pixels
 in fewer than the six triangles of an inside pixel. A point cloud's are where a point's nearest
 neighbours, seen in its tangent plane, leave a gap wider than EDGE_GAP_DEG around it (the angle
 criterion of PCL's BoundaryEstimation). PCL's 90 degrees over 16 neighbours flags 26 % of the
@@ -15,17 +17,27 @@ EDGE_NEIGHBOURS = 24
 EDGE_GAP_DEG = 120.0
 
 
-def boundary_vertices(n_vertices: int, faces: np.ndarray) -> np.ndarray:
-    """(N,) bool: vertices on an edge used by one triangle only (rims of the surface and its holes)."""
-    out = np.zeros(n_vertices, dtype=bool)
+def same_position(vertices: np.ndarray) -> np.ndarray:
+    """(N,) int64: one number per distinct position of (N, 3) vertices, the same for vertices at the
+    same position (bit for bit)."""
+    rows = np.ascontiguousarray(vertices, dtype=np.float64).view(np.dtype((np.void, 24))).ravel()
+    return np.unique(rows, return_inverse=True)[1].ravel().astype(np.int64)
+
+
+def boundary_vertices(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(N,) bool: vertices of (N, 3) `vertices` on an edge used by one triangle only (rims of the
+    surface and its holes), vertices at one position joined."""
+    out = np.zeros(len(vertices), dtype=bool)
     if len(faces) == 0:
         return out
+    same = same_position(vertices)
+    n, faces = int(same.max()) + 1, same[faces]
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    keys, counts = np.unique(edges[:, 0] * n_vertices + edges[:, 1], return_counts=True)
-    lonely = keys[counts == 1]
-    out[lonely // n_vertices] = True
-    out[lonely % n_vertices] = True
-    return out
+    keys, counts = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
+    lonely = np.zeros(n, dtype=bool)
+    lonely[keys[counts == 1] // n] = True
+    lonely[keys[counts == 1] % n] = True
+    return lonely[same]
 
 
 def grid_boundary(n_vertices: int, faces: np.ndarray) -> np.ndarray:

@@ -89,7 +89,7 @@ class Scan:
         elif self.is_point_cloud:
             out = cloud_boundary(self.vertices, self.normals)
         else:
-            out = boundary_vertices(len(self.vertices), self.faces)
+            out = boundary_vertices(self.vertices, self.faces)
         out.flags.writeable = False
         return out
 

@@ -29,8 +29,8 @@ def test_subdivision_keeps_the_surface_and_its_only_rim():
     assert np.median(edges) <= 1.0 < 2.0 * np.median(edges)  # as few halvings as it takes
     _, dist, _ = trimesh.proximity.closest_point(mesh, vertices)
     assert dist.max() < 1e-9  # new vertices lie on the original triangles
-    rim = boundary_vertices(len(vertices), faces)
-    on_rim_before = boundary_vertices(len(mesh.vertices), mesh.faces)
+    rim = boundary_vertices(vertices, faces)
+    on_rim_before = boundary_vertices(mesh.vertices, mesh.faces)
     rim_edges = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).outline().entities
     assert rim.sum() == 2 ** 2 * on_rim_before.sum() == 2 ** 2 * sum(len(e.points) - 1 for e in rim_edges)
     assert len(np.unique(vertices, axis=0)) == len(vertices)  # midpoints shared: no cracks

@@ -69,6 +69,29 @@ def test_every_triangle_with_its_own_corners_is_joined_into_a_surface(tmp_path, 
     assert len(scan.vertices) == len(face_m.vertices) and (scan.colors == [200, 150, 120]).all()
 
 
+def test_a_texture_seam_across_the_face_is_no_rim_and_does_not_bend_the_normals(tmp_path, face_m):
+    """A textured OBJ whose texture map is cut down the middle of the face (each vertex on the cut
+    written twice, once per side, with its own texture coordinates, as texture atlases do): the cut
+    is no rim of the surface, and both copies of a vertex have the normal the uncut surface has."""
+    right = face_m.triangles_center[:, 0] > 0
+    seam = np.intersect1d(face_m.faces[right], face_m.faces[~right])
+    copy = np.arange(len(face_m.vertices))
+    copy[seam] = len(face_m.vertices) + np.arange(len(seam))
+    faces = np.where(right[:, None], copy[face_m.faces], face_m.faces)
+    vertices = np.vstack([face_m.vertices, face_m.vertices[seam]])
+    uv = np.column_stack([0.5 * (vertices[:, 0] > 0) + 0.1 * (np.arange(len(vertices)) >= len(face_m.vertices)), np.full(len(vertices), 0.5)])
+    tex = Image.fromarray(np.full((16, 16, 3), [200, 150, 120], dtype=np.uint8))
+    trimesh.Trimesh(vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, image=tex), process=False).export(tmp_path / "seam.obj")
+    scan = load_scan(tmp_path / "seam.obj")
+    face_m.export(tmp_path / "whole.obj")
+    whole = load_scan(tmp_path / "whole.obj")
+    assert len(scan.vertices) == len(whole.vertices) + len(seam) and scan.texture is not None
+    at = {tuple(v): i for i, v in enumerate(whole.vertices)}
+    same = np.array([at[tuple(v)] for v in scan.vertices])
+    assert len(seam) > 20 and np.array_equal(scan.rims, whole.rims[same])
+    assert np.abs(scan.normals - whole.normals[same]).max() < 1e-9
+
+
 def test_point_cloud_gets_outward_normals(tmp_path, face_m):
     """PCA normals are the surface's, and 99 % point out of the face, as the subject's surface
     does, also beside the nose, under it and in the eye sockets. Pointed away from the centroid

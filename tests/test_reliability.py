@@ -296,3 +296,25 @@ def test_the_advice_blames_a_meshs_colours_only_when_the_landmarks_were_found_on
     bare = _spread_gate(scan, dataclasses.replace(found, note=found.note + "; on renders" + WITHOUT_COLOURS), 12.0, QualityParams())
     assert coloured.flag and "colours may be misplaced" in coloured.message
     assert bare.flag and "colours" not in bare.message and "shaded render" in bare.message
+
+
+def test_a_decimated_meshs_sparse_flat_parts_have_scan_data_and_its_holes_have_none():
+    """The plane z = 0 sampled every 1 mm, but every 8 mm over a 24 mm square (a decimated mesh's
+    vertices are sparse where the face is flat), and with no points over a 20 mm disc (a hole):
+    the coverage and hole gates count points 6 mm from the sparse square's centre as over scan data
+    (by the scan's median spacing, 1 of 12 was), and points within 7 mm of the hole's centre as over
+    none."""
+    from scipy.spatial import cKDTree
+
+    from cpapfit.quality import _has_data
+
+    grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
+    sparse = (np.abs(grid - [-30, 0]) < 12).all(axis=1)
+    grid = grid[(~sparse | (grid % 8 == 0).all(axis=1)) & (np.linalg.norm(grid - [30, 0], axis=1) > 10)]
+    tree = cKDTree(np.column_stack([grid, np.zeros(len(grid))]))
+    t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    over_sparse = np.column_stack([-30 + 6 * np.cos(t), 6 * np.sin(t), np.zeros(12)])
+    over_hole = np.column_stack([30 + 7 * np.cos(t), 7 * np.sin(t), np.zeros(12)])
+    assert _has_data(tree, over_sparse, QualityParams().near_mm).all()
+    assert not _has_data(tree, over_hole, QualityParams().near_mm).any()
+    assert not _has_data(tree, np.array([[30.0, 0.0, 0.0]]), QualityParams().near_mm).any()

@@ -59,5 +59,5 @@ def test_grid_boundary_equals_the_edge_definition():
     pts = backproject(depth, K)[valid]
     scan = Scan(vertices=pts, faces=faces, normals=np.zeros_like(pts), depth=depth, valid=valid, pixel_vertex=pixel_vertex, intrinsics=K)
     used = np.bincount(faces.ravel(), minlength=len(pts)) > 0
-    assert np.array_equal(scan.rims[used], boundary_vertices(len(pts), faces)[used])
+    assert np.array_equal(scan.rims[used], boundary_vertices(pts, faces)[used])
     assert scan.rims[~used].all()  # a pixel with no triangle is no place to match

@@ -42,7 +42,7 @@ def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
     if not scan.is_capture and len(faces) and _median_edge(vertices, faces) > 2.0 * spacing_mm:
         vertices, faces = subdivided(vertices, faces, 1.5 * spacing_mm)
         normals = _subdivided_normals(scan, vertices, faces)
-        boundary = boundary_vertices(len(vertices), faces)
+        boundary = boundary_vertices(vertices, faces)
     tree = None if use_grid else cKDTree(vertices, balanced_tree=False, compact_nodes=False)  # the quicker queries
     return Target(vertices, normals, boundary, tree, scan if use_grid else None)
 

@@ -63,7 +63,7 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray | None, scan: Scan, surface: tr
     spacing there, at most NORMAL_REACH_MM (not the gaps between the points: a cloud of a decimated
     mesh's vertices is sparse where the face is flat)."""
     tree = cKDTree(scan.vertices)
-    plane = off_skin(scan, tree, rim, np.clip(SPACINGS * local_spacing(tree, rim), CLOUD_REACH_MM, NORMAL_REACH_MM))
+    plane = off_skin(scan, tree, rim, data_reach(tree, rim, CLOUD_REACH_MM))
     nearest = tree.query(rim, k=NEAREST)[1]
     covered = ~_edge(scan)[nearest].any(axis=1)
     around = scan.normals[nearest]  # (K, NEAREST, 3)
@@ -119,6 +119,13 @@ def local_spacing(tree: cKDTree, points: np.ndarray) -> np.ndarray:
     nearest neighbours (on an even cloud about 1.3 times the nearest-neighbour spacing)."""
     nearest = tree.query(points)[1]
     return tree.query(tree.data[nearest], k=NEAREST + 1)[0][:, 1:].mean(axis=1)
+
+
+def data_reach(tree: cKDTree, points: np.ndarray, least_mm: float) -> np.ndarray:
+    """(K,) mm: how near a scan point must lie to each of (K, 3) points for the scan to have data
+    there: SPACINGS local spacings (`local_spacing`; a decimated mesh's vertices lie 10-20 mm apart
+    where the face is flat), at least `least_mm`, at most NORMAL_REACH_MM."""
+    return np.clip(SPACINGS * local_spacing(tree, points), least_mm, NORMAL_REACH_MM)
 
 
 def off_skin(scan: Scan, tree: cKDTree, points: np.ndarray, reach: float | np.ndarray) -> np.ndarray:

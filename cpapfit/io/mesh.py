@@ -7,6 +7,7 @@ import trimesh
 
 from ..errors import InputError
 from ..render import texels
+from ..rims import same_position
 from ..scan import Scan
 from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
@@ -156,9 +157,13 @@ def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
 
 
 def _mesh_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(N, 3) area-weighted unit vertex normals following the file's winding."""
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    return np.array(mesh.vertex_normals, dtype=np.float64)
+    """(N, 3) area-weighted unit vertex normals following the file's winding, over every triangle
+    at a vertex's position (the copies of a vertex on a texture seam share one normal)."""
+    same = same_position(vertices)
+    joined = np.zeros((int(same.max()) + 1, 3))
+    joined[same] = vertices
+    mesh = trimesh.Trimesh(joined, same[faces], process=False)
+    return np.array(mesh.vertex_normals, dtype=np.float64)[same]
 
 
 def _appearance(geom, n: int):
