@@ -307,14 +307,33 @@ def test_a_decimated_meshs_sparse_flat_parts_have_scan_data_and_its_holes_have_n
     from scipy.spatial import cKDTree
 
     from cpapfit.quality import _has_data
+    from cpapfit.scan import Scan
 
     grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
     sparse = (np.abs(grid - [-30, 0]) < 12).all(axis=1)
     grid = grid[(~sparse | (grid % 8 == 0).all(axis=1)) & (np.linalg.norm(grid - [30, 0], axis=1) > 10)]
-    tree = cKDTree(np.column_stack([grid, np.zeros(len(grid))]))
+    vertices = np.column_stack([grid, np.zeros(len(grid))])
+    mesh, tree = Scan(vertices, np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1))), cKDTree(vertices)
     t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     over_sparse = np.column_stack([-30 + 6 * np.cos(t), 6 * np.sin(t), np.zeros(12)])
     over_hole = np.column_stack([30 + 7 * np.cos(t), 7 * np.sin(t), np.zeros(12)])
-    assert _has_data(tree, over_sparse, QualityParams().near_mm).all()
-    assert not _has_data(tree, over_hole, QualityParams().near_mm).any()
-    assert not _has_data(tree, np.array([[30.0, 0.0, 0.0]]), QualityParams().near_mm).any()
+    assert _has_data(mesh, tree, over_sparse, QualityParams().near_mm).all()
+    assert not _has_data(mesh, tree, over_hole, QualityParams().near_mm).any()
+    assert not _has_data(mesh, tree, np.array([[30.0, 0.0, 0.0]]), QualityParams().near_mm).any()
+
+
+def test_a_depth_image_riddled_with_small_holes_has_data_only_near_its_pixels():
+    """A depth image at 1 mm pitch with only 2 x 2 pixel islands every 6 pixels left (the rest holes):
+    the middle of the 4 x 4 hole between four islands, 3.5 mm from the nearest pixel, has no scan
+    data (by the islands' own one-sided neighbourhoods it would: their local spacing reads 3.7 mm)."""
+    from scipy.spatial import cKDTree
+
+    from cpapfit.quality import _has_data
+    from cpapfit.scan import Scan
+
+    grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
+    grid = grid[((grid % 6) < 2).all(axis=1)]
+    vertices = np.column_stack([grid, np.zeros(len(grid))])
+    capture = Scan(vertices, np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1)), depth=np.zeros((81, 121)))
+    middles = np.array([[3.5 + 6 * i, 3.5 + 6 * j, 0.0] for i in range(-5, 5) for j in range(-5, 5)])
+    assert not _has_data(capture, cKDTree(vertices), middles, QualityParams().near_mm).any()
