@@ -70,13 +70,13 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray | None, scan: Scan, surface: tr
     agree = around[:, 0] if normals is None else normals
     skin = (around * np.sign(np.einsum("knj,kj->kn", around, agree))[..., None]).sum(axis=1)
     skin /= np.maximum(np.linalg.norm(skin, axis=1, keepdims=True), 1e-12)
-    if scan.is_point_cloud:
-        coarse = plane
-    else:
-        coarse = np.abs(skin_under(rim, surface, skin, NORMAL_REACH_MM))
-        coarse = np.where(coarse <= NORMAL_REACH_MM, coarse, plane)
-    fitted = quadric_gap(rim, skin, scan, tree)
-    return RimGap(np.where(np.isfinite(fitted), fitted, coarse), covered)
+    gap = quadric_gap(rim, skin, scan, tree)
+    coarse = np.isnan(gap)  # too few scan points for the fit
+    gap[coarse] = plane[coarse]
+    if coarse.any() and not scan.is_point_cloud:
+        rays = np.abs(skin_under(rim[coarse], surface, skin[coarse], NORMAL_REACH_MM))
+        gap[coarse] = np.where(rays <= NORMAL_REACH_MM, rays, plane[coarse])
+    return RimGap(gap, covered)
 
 
 def quadric_gap(points: np.ndarray, axes: np.ndarray, scan: Scan, tree: cKDTree) -> np.ndarray:
