@@ -20,8 +20,9 @@ $(STAMP): pyproject.toml requirements.lock
 demo: $(STAMP)
 	$(VENV)/bin/cpapfit demo
 
+# Two worker processes (pytest-xdist): most tests use one core, and CI has two.
 test: $(STAMP) $(CHROMIUM)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2
 
 # The report test opens report.html in headless Chromium: Debian's package, no browser download.
 $(CHROMIUM):
