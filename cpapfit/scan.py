@@ -9,6 +9,14 @@ import trimesh
 from .frozen import freeze_arrays
 from .rims import boundary_vertices, cloud_boundary, grid_boundary
 
+HEAD_MM = 600.0  # the largest robust extent (mm) of a scan of a face, or of the whole head: more is a bust or a scene
+
+
+def robust_extent(vertices: np.ndarray) -> float:
+    """Largest 1st-to-99th percentile extent along x, y or z of (N, 3) vertices, in their units."""
+    lo, hi = np.percentile(vertices, [1.0, 99.0], axis=0)
+    return float((hi - lo).max())
+
 
 @dataclass(frozen=True)
 class Intrinsics:

@@ -173,6 +173,20 @@ def _(d, s):
     return [mesh_file(d / "egg.ply", egg)], ["no face found"]  # a point cloud: the landmark-free path
 
 
+@case("a scan larger than a head, no face in it")
+def _(d, s):
+    blob = trimesh.creation.icosphere(4, radius=1.0)  # 900 mm across in mm: a bust's size, read as mm
+    return [mesh_file(d / "blob.ply", blob.vertices * [350.0, 450.0, 200.0], blob.faces)], ["no face found", "crop it to the head"]
+
+
+@case("a room scan in metres with a face in it")
+def _(d, s):
+    x, y = np.meshgrid(np.linspace(-1.5, 1.5, 150), np.linspace(-1.5, 1.5, 150))
+    wall = np.column_stack([x.ravel(), y.ravel(), np.full(x.size, 1.0)])  # 3 m of wall behind the head
+    points = np.vstack([s.ph.surface / 1000.0 - s.ph.surface.mean(axis=0) / 1000.0, wall])
+    return [mesh_file(d / "room.ply", points)], ["none of", "crop a scan of more than head and shoulders"]
+
+
 # --- RGB-D captures -----------------------------------------------------------------------
 
 def save_png(path: Path, image: np.ndarray) -> None:

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from ..scan import Scan
+from ..scan import HEAD_MM, Scan
 from ..template import Template
 from .similarity import Similarity
 
@@ -151,9 +151,11 @@ def _first(heights) -> float:
     return next((h for h in heights if np.isfinite(h)), np.nan)
 
 
-def require_face(check: FaceCheck, how: str, capture: bool = False) -> None:
-    """Raise a clear error when the alignment does not lie on a face (of a `capture`: an RGB-D frame)."""
+def require_face(check: FaceCheck, how: str, capture: bool = False, across_mm: float = np.nan) -> None:
+    """Raise a clear error when the alignment does not lie on a face (of a `capture`: an RGB-D frame;
+    `across_mm`: a mesh's or cloud's robust extent, mm: a scene or a body is to be cropped to the head)."""
     if not check.is_face:
         scale = "are its depth scale and intrinsics this camera's?" if capture else "are its units right? state them with --units"
         units = "" if SCALE_RANGE[0] <= check.scale <= SCALE_RANGE[1] else f" (or {scale})"
-        raise InputError(f"no face found ({how}): {check.describe()}; is this a face scan, facing the sensor{units}?")
+        crop = f"; the scan is {across_mm:.0f} mm across, more than a head ({HEAD_MM:.0f}): crop it to the head" if across_mm > HEAD_MM else ""
+        raise InputError(f"no face found ({how}): {check.describe()}{crop}; is this a face scan, facing the sensor{units}?")

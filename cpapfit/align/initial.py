@@ -3,7 +3,9 @@
 from dataclasses import replace
 from typing import Iterator
 
-from ..scan import Scan
+import numpy as np
+
+from ..scan import Scan, robust_extent
 from ..template import Template, central_face
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
 from ..landmarks.cloud import facing_surface
@@ -44,7 +46,8 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
         if check.is_face:
             break
         failed.append(label)
-    require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture)
+    across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
+    require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture, across)
     rejected = f"the face found by {' and '.join(dict.fromkeys(failed))} failed the face check" if failed else ""
     return replace(found.landmarks, rejected=rejected), found.similarity, check
 

@@ -3,6 +3,7 @@
 import numpy as np
 
 from ..errors import UnitsError
+from ..scan import HEAD_MM, robust_extent
 
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "um": 0.001, "in": 25.4}
 UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "um": "micrometres", "in": "inches"}
@@ -11,17 +12,11 @@ UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "um": "mi
 AUTO_UNITS = ("mm", "cm", "m", "um")
 UNIT_CHOICES = ("auto", *MM_PER_UNIT)  # what --units takes
 # Largest robust extent of a scan of a face (and at most the head), in mm.
-FACE_EXTENT_MM = (70.0, 600.0)
+FACE_EXTENT_MM = (70.0, HEAD_MM)
 # ... of a scan with more than the face in it (head, shoulders, chest), in mm: taken when stated, and
 # by auto in mm, m or um, where it cannot be mistaken for a face in another unit.
 BUST_EXTENT_MM = (600.0, 2000.0)
 BUST_UNITS = ("mm", "m", "um")
-
-
-def robust_extent(vertices: np.ndarray) -> float:
-    """Largest 1st-to-99th percentile extent along x, y or z of (N, 3) vertices, in their units."""
-    lo, hi = np.percentile(vertices, [1.0, 99.0], axis=0)
-    return float((hi - lo).max())
 
 
 def _fits(extent: float, unit: str, extent_mm: tuple[float, float] = FACE_EXTENT_MM) -> bool:
@@ -47,6 +42,7 @@ def decide_units(vertices: np.ndarray, stated: str = "auto") -> tuple[str, str]:
             raise UnitsError(
                 f"in {UNIT_NAMES[stated]} the scan is {size:.4g} mm across, but a face is {lo:.0f}-{hi:.0f} mm (with the "
                 f"shoulders up to {BUST_EXTENT_MM[1]:.0f}): check the unit (--units {'|'.join(MM_PER_UNIT)}) or use --units auto"
+                + ("; crop a scan of more than head and shoulders to the head" if size > BUST_EXTENT_MM[1] else "")
             )
         return stated, f"units: {UNIT_NAMES[stated]} as stated ({extent * MM_PER_UNIT[stated]:.0f} mm across)"
     for unit in AUTO_UNITS:
@@ -61,5 +57,6 @@ def decide_units(vertices: np.ndarray, stated: str = "auto") -> tuple[str, str]:
                           "more than a face, e.g. head and shoulders)")
     raise UnitsError(
         f"the scan is {extent:.4g} units across, which is the size of a face ({lo:.0f}-{hi:.0f} mm, with the shoulders up to "
-        f"{BUST_EXTENT_MM[1]:.0f} mm) in none of mm, cm, m or um: is it a face scan? state the unit with --units ({', '.join(MM_PER_UNIT)})"
+        f"{BUST_EXTENT_MM[1]:.0f} mm) in none of mm, cm, m or um: is it a face scan? state the unit with --units ({', '.join(MM_PER_UNIT)}), "
+        "or crop a scan of more than head and shoulders to the head"
     )
