@@ -245,6 +245,14 @@ def _(d, s):
     return [d], ["depth.png"]
 
 
+@case("intrinsics written row-major")
+def _(d, s):
+    path = capture(d, s) / "intrinsics.json"
+    data = json.loads(path.read_text())
+    path.write_text(json.dumps(data | {"intrinsic_matrix": np.reshape(data["intrinsic_matrix"], (3, 3)).T.ravel().tolist()}))
+    return [d], ["row-major"]
+
+
 @case("intrinsics missing")
 def _(d, s):
     (capture(d, s) / "intrinsics.json").unlink()

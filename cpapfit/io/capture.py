@@ -70,6 +70,9 @@ def read_intrinsics(path: Path) -> tuple[Intrinsics, float]:
             f"{path}: not Open3D intrinsics ({type(exc).__name__}: {exc}); expected width, height, "
             "intrinsic_matrix (9 numbers, column-major) and optional depth_scale"
         ) from None
+    if np.isfinite(k).all() and not np.allclose(k[2], [0.0, 0.0, 1.0]):
+        stored = "row-major: store it column-major, as Open3D does" if np.allclose(k[:, 2], [0.0, 0.0, 1.0]) else "not a camera matrix"
+        raise InputError(f"{path}: intrinsic_matrix's last row is {k[2].tolist()}, not [0, 0, 1] (read column-major); it is {stored}")
     intr = Intrinsics(width=w, height=h, fx=k[0, 0], fy=k[1, 1], cx=k[0, 2], cy=k[1, 2])
     plausible = (
         np.isfinite(k).all() and w > 0 and h > 0 and intr.fx > 0 and intr.fy > 0
