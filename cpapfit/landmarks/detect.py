@@ -30,6 +30,9 @@ MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
 MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the similarity
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
 FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
+# A frontal render is upright: its face is taken as MediaPipe sees it unturned, if it sees one (a
+# face turned 90 deg can fit the template with less RMS and be mm off: fran as a float64 PLY).
+UPRIGHT = (0,)
 TWO_FACES_APART = 0.5  # two detections whose centres are farther apart than this x face size are two faces
 RENDER_THREADS = 2  # a mesh's axis views are rendered this many at a time (Embree and numpy release the GIL)
 
@@ -82,7 +85,8 @@ def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detec
     for _ in range(FRONTAL_PASSES):
         view = face_view(pose.apply(template.landmarks), pose.rotation[:, 2], pose.rotation[:, 1])
         image, depth = render_view(scan, view, scene)
-        found = _best([Sight(image, depth, view.intrinsics, view.to_scan, "frontal render")], template, "render", one_face=False)
+        seen = [Sight(image, depth, view.intrinsics, view.to_scan, "frontal render")]
+        found = _best(seen, template, "render", one_face=False, turns=UPRIGHT) or _best(seen, template, "render", one_face=False)
         if found is None:
             break
         best, pose = _as_found_by(found, "render"), found.similarity
@@ -94,15 +98,15 @@ def _as_found_by(det: Detection, path: str) -> Detection:
     return Detection(replace(det.landmarks, path=path), det.similarity, det.inliers)
 
 
-def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True) -> Detection | None:
-    """The detection with the least similarity RMS over the sights and image rotations, or None.
-    `one_face`: refuse when the sight and rotation of that detection show two faces (only there: in
-    a face turned upside down MediaPipe can see a second, phantom face; a frontal render frames one
-    face only: skipped)."""
+def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True, turns: tuple[int, ...] = (0, 1, 2, 3)) -> Detection | None:
+    """The detection with the least similarity RMS over the sights and image rotations (k * 90 deg,
+    k in `turns`), or None. `one_face`: refuse when the sight and rotation of that detection show two
+    faces (only there: in a face turned upside down MediaPipe can see a second, phantom face; a
+    frontal render frames one face only: skipped)."""
     best, crowd = None, None
     normals = template.mesh().vertex_normals[:N_LANDMARKS]
     for sight in seen:
-        for k, faces in detect_rotations(sight.image):
+        for k, faces in detect_rotations(sight.image, turns):
             for uv in faces:
                 det = _evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg")
                 if det is not None and (best is None or det.similarity.rms_mm < best.similarity.rms_mm):

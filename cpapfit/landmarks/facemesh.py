@@ -61,7 +61,7 @@ def unrotate(uv: np.ndarray, k: int, shape: tuple[int, int]) -> np.ndarray:
     return uv
 
 
-def detect_rotations(image: np.ndarray) -> list[tuple[int, list[np.ndarray]]]:
-    """[(k, faces)] for the image turned by k * 90 degrees, k = 0..3, faces in original pixel coordinates."""
+def detect_rotations(image: np.ndarray, turns: tuple[int, ...] = (0, 1, 2, 3)) -> list[tuple[int, list[np.ndarray]]]:
+    """[(k, faces)] for the image turned by k * 90 degrees, k in `turns`, faces in original pixel coordinates."""
     shape = image.shape[:2]
-    return [(k, [unrotate(f, k, shape) for f in detect(np.rot90(image, k))]) for k in range(4)]
+    return [(k, [unrotate(f, k, shape) for f in detect(np.rot90(image, k))]) for k in turns]
