@@ -9,6 +9,7 @@ from ..errors import InputError
 from ..render import texels
 from ..rims import same_position
 from ..scan import Scan
+from ..winding import wound_alike
 from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
 from .surface import MIN_SHARED_EDGES, check_surface, edge_use
@@ -25,7 +26,10 @@ def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     _check(path, vertices, faces)
     unit, note = decide_units(vertices, units)
     vertices = vertices * MM_PER_UNIT[unit]
-    normals = _mesh_normals(vertices, faces) if len(faces) else cloud_normals(vertices)
+    if len(faces):
+        faces, normals = _wound_alike(vertices, faces)
+    else:
+        normals = cloud_normals(vertices)
     return Scan(
         vertices=vertices, faces=faces, normals=normals, source=str(path), units=unit, units_note=note,
         colors=colors, texture=texture, uv=uv,
@@ -156,14 +160,19 @@ def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
         check_surface(path, vertices, faces)
 
 
-def _mesh_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(N, 3) area-weighted unit vertex normals following the file's winding, over every triangle
-    at a vertex's position (the copies of a vertex on a texture seam share one normal)."""
+def _wound_alike(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((M, 3) faces, (N, 3) unit normals): the triangles wound against their neighbours turned to
+    agree with them (`winding.py`; the file's winding where most of it agrees), and
+    area-weighted vertex normals over every triangle at a vertex's position (the copies of a vertex
+    on a texture seam share one normal). A mesh wound one way on one side and the other on the
+    other had normals that disagreed across the face, and the registration dropped half of it."""
     same = same_position(vertices)
     joined = np.zeros((int(same.max()) + 1, 3))
     joined[same] = vertices
+    turned = (wound_alike(same[faces]) != same[faces]).any(axis=1)
+    faces = np.where(turned[:, None], faces[:, ::-1], faces)
     mesh = trimesh.Trimesh(joined, same[faces], process=False)
-    return np.array(mesh.vertex_normals, dtype=np.float64)[same]
+    return faces, np.array(mesh.vertex_normals, dtype=np.float64)[same]
 
 
 def _appearance(geom, n: int):

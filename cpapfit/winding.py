@@ -1,0 +1,59 @@
+"""Winding: turn the triangles of a mesh that are wound against their neighbours.
+
+Two triangles sharing an edge agree when they run along it in opposite directions. A breadth-first
+tree over the triangles (scipy's csgraph, one root joining every connected piece) carries the
+agreement from each piece's first triangle to the rest; each triangle's turn is the parity of the
+disagreements on its path to the root, summed by pointer jumping. Edges shared by more than two
+triangles are not followed.
+"""
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+
+def wound_alike(faces: np.ndarray) -> np.ndarray:
+    """(M, 3) `faces` (vertex indices; vertices at one position as one index) with the triangles that
+    disagree with their neighbours turned: the way most of the triangles were wound is kept."""
+    first, second, turned = _neighbours(faces)
+    if not turned.any():
+        return faces
+    m = len(faces)
+    graph = csr_matrix((np.ones(len(first)), (first, second)), shape=(m + 1, m + 1))
+    _, piece = connected_components(graph[:m, :m], directed=False)
+    starts = np.unique(piece, return_index=True)[1]
+    graph = graph + csr_matrix((np.ones(len(starts)), (np.full(len(starts), m), starts)), shape=(m + 1, m + 1))
+    _, parent = breadth_first_order(graph, m, directed=False, return_predecessors=True)
+    parent[m] = m
+    flip = _disagrees(first, second, turned, np.arange(m + 1), parent, m)
+    while (parent != m).any():  # pointer jumping: each triangle's parity to the root
+        flip, parent = flip ^ flip[parent], parent[parent]
+    flip = flip[:m]
+    flip = flip if flip.mean() <= 0.5 else ~flip
+    return np.where(flip[:, None], faces[:, ::-1], faces)
+
+
+def _neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(first, second, turned): the triangles sharing each edge used by exactly two, and whether
+    they run along it the same way (one of them is turned)."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    owner = np.tile(np.arange(len(faces)), 3)
+    n = int(faces.max()) + 1
+    key = np.sort(directed, axis=1) @ np.array([n, 1], dtype=np.int64)
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    length = np.diff(np.r_[start, len(key)])
+    a, b = order[start[length == 2]], order[start[length == 2] + 1]
+    return owner[a], owner[b], directed[a, 0] == directed[b, 0]
+
+
+def _disagrees(first, second, turned, child, parent, root) -> np.ndarray:
+    """(len(child),) bool: whether each triangle and its parent in the tree disagree (not at the root)."""
+    m1 = root + 1
+    keys = np.minimum(first, second) * m1 + np.maximum(first, second)
+    order = np.argsort(keys, kind="stable")
+    query = np.minimum(child, parent) * m1 + np.maximum(child, parent)
+    at = np.clip(np.searchsorted(keys[order], query), 0, len(order) - 1)
+    found = keys[order][at] == query
+    return found & turned[order][at] & (parent != root)
