@@ -12,12 +12,13 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 
-def wound_alike(faces: np.ndarray) -> np.ndarray:
-    """(M, 3) `faces` (vertex indices; vertices at one position as one index) with the triangles that
-    disagree with their neighbours turned: the way most of the triangles were wound is kept."""
+def wound_against(faces: np.ndarray) -> np.ndarray:
+    """(M,) bool: the triangles of (M, 3) `faces` (vertex indices; vertices at one position as one
+    index) to turn so that every triangle agrees with its neighbours; the way most of the triangles
+    were wound is kept."""
     first, second, turned = _neighbours(faces)
     if not turned.any():
-        return faces
+        return np.zeros(len(faces), dtype=bool)
     m = len(faces)
     graph = csr_matrix((np.ones(len(first)), (first, second)), shape=(m + 1, m + 1))
     _, piece = connected_components(graph[:m, :m], directed=False)
@@ -29,8 +30,7 @@ def wound_alike(faces: np.ndarray) -> np.ndarray:
     while (parent != m).any():  # pointer jumping: each triangle's parity to the root
         flip, parent = flip ^ flip[parent], parent[parent]
     flip = flip[:m]
-    flip = flip if flip.mean() <= 0.5 else ~flip
-    return np.where(flip[:, None], faces[:, ::-1], faces)
+    return flip if flip.mean() <= 0.5 else ~flip
 
 
 def _neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

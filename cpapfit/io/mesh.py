@@ -9,7 +9,7 @@ from ..errors import InputError
 from ..render import texels
 from ..rims import same_position
 from ..scan import Scan
-from ..winding import wound_alike
+from ..winding import wound_against
 from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
 from .surface import MIN_SHARED_EDGES, check_surface, edge_use
@@ -169,8 +169,7 @@ def _wound_alike(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     same = same_position(vertices)
     joined = np.zeros((int(same.max()) + 1, 3))
     joined[same] = vertices
-    turned = (wound_alike(same[faces]) != same[faces]).any(axis=1)
-    faces = np.where(turned[:, None], faces[:, ::-1], faces)
+    faces = np.where(wound_against(same[faces])[:, None], faces[:, ::-1], faces)
     mesh = trimesh.Trimesh(joined, same[faces], process=False)
     return faces, np.array(mesh.vertex_normals, dtype=np.float64)[same]
 

@@ -15,7 +15,7 @@ UNIT_CHOICES = ("auto", *MM_PER_UNIT)  # what --units takes
 FACE_EXTENT_MM = (70.0, HEAD_MM)
 # ... of a scan with more than the face in it (head, shoulders, chest), in mm: taken when stated, and
 # by auto in mm, m or um, where it cannot be mistaken for a face in another unit.
-BUST_EXTENT_MM = (600.0, 2000.0)
+BUST_EXTENT_MM = (HEAD_MM, 2000.0)
 BUST_UNITS = ("mm", "m", "um")
 
 

@@ -31,8 +31,9 @@ MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the 
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
 FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
 # A frontal render is upright: its face is taken as MediaPipe sees it unturned, if it sees one (a
-# face turned 90 deg can fit the template with less RMS and be mm off: fran as a float64 PLY).
-UPRIGHT = (0,)
+# face turned 90 deg can fit the template with less RMS and be mm off: fran as a float64 PLY);
+# the image turned is tried only when it sees none.
+UPRIGHT, TURNED = (0,), (1, 2, 3)
 TWO_FACES_APART = 0.5  # two detections whose centres are farther apart than this x face size are two faces
 RENDER_THREADS = 2  # a mesh's axis views are rendered this many at a time (Embree and numpy release the GIL)
 
@@ -86,7 +87,7 @@ def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detec
         view = face_view(pose.apply(template.landmarks), pose.rotation[:, 2], pose.rotation[:, 1])
         image, depth = render_view(scan, view, scene)
         seen = [Sight(image, depth, view.intrinsics, view.to_scan, "frontal render")]
-        found = _best(seen, template, "render", one_face=False, turns=UPRIGHT) or _best(seen, template, "render", one_face=False)
+        found = _best(seen, template, "render", one_face=False, turns=UPRIGHT) or _best(seen, template, "render", one_face=False, turns=TURNED)
         if found is None:
             break
         best, pose = _as_found_by(found, "render"), found.similarity
