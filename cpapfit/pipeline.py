@@ -78,7 +78,7 @@ def align(scan: Scan, user_landmarks: Landmarks | None = None) -> Alignment:
 def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
     """Stage nonrigid: the similarity-aligned template warped onto the scan."""
     template = load_template()
-    return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params)
+    return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params, template.mirror)
 
 
 def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration, np.ndarray | None]:

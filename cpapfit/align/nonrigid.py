@@ -1,6 +1,6 @@
 """Non-rigid registration: the paper's elastic ICP of the similarity-aligned template onto the scan.
 
-Four additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
+Five additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
 the face's proportions, so that the elastic stage finds only local shape); detected landmarks
 (MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
 landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
@@ -11,19 +11,24 @@ and a careless file must not drag the seal along the skin where the geometry can
 And coarse gates: at the stiffest level pairs up to 15 mm and 60 deg apart are kept, the gates
 narrowing with the stiffness (halved with it) to the paper's 5 mm and 25 deg, so that a part of
 the face far from the template (a chin 6-10 mm off and tilted) is pulled in while the membrane is
-stiff instead of being left out. With all four off (`affine=None`, `detected_landmark_factor=1`,
-`user_trust_mm=inf`, `coarse_gates=None`) this is the paper's method.
+stiff instead of being left out. And a mirror term (align/symmetry.py): the template, mirrored across
+the scan's own plane of symmetry, lies on itself, at `symmetry` per vertex pair relaxed with the
+membrane, so that the template's midline is the face's and an unseen part of the face takes the
+shape of the side seen, while the skin is free to be asymmetric once the membrane is soft. With all
+five off (`affine=None`, `detected_landmark_factor=1`, `user_trust_mm=inf`, `coarse_gates=None`,
+`symmetry=0`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
 (2) reject pairs > 5 mm apart, with normals > 25 deg apart (coarse gates: wider while stiff), or on the scan's boundary;
 (3) solve for the displacement field D (from V0, the similarity-aligned template after the affine start) minimising
 
     0.1 * sum |V0 + D - c|^2 + 1 * sum (n_c . (V0 + D - c))^2 + 100 * D^T L D + 10 * sum_k |V0_k + D_k - r_k|^2
+      + 1 * sum_(i, j) |reflect(V0_i + D_i) - (V0_j + D_j)|^2
 
-(point-to-point, point-to-plane, membrane with cotangent weights L, landmarks r);
+(point-to-point, point-to-plane, membrane with cotangent weights L, landmarks r, mirror pairs (i, j));
 (4) when the relative change of D (relative to the template's whole movement from the
 similarity) falls under 1e-2 (or after level_iterations at one stiffness,
-so that slow scans still reach the final stiffness), halve the membrane and landmark weights;
+so that slow scans still reach the final stiffness), halve the membrane, landmark and mirror weights;
 stop when that happens at the final stiffness (after `relaxations` halvings) or at max_iterations.
 
 Speed: the point-to-plane term is linearised about the current vertex (its foot point on the
@@ -31,6 +36,8 @@ scan's tangent plane), and vertices without a pair are held at their current pos
 same weight, so the system matrix (w I + mu L + lambda S) is the same for x, y and z and does
 not change between iterations at one stiffness: it is factorised once per stiffness level (a
 handful of times, reusing the symbolic analysis) and each iteration is three back-substitutions.
+The mirror term is solved in the plane's frame, where it adds one matrix across the plane and
+another along it: two factorisations per level instead of one.
 """
 
 from concurrent.futures import ThreadPoolExecutor
@@ -40,6 +47,7 @@ from typing import NamedTuple
 import numpy as np
 import qdldl
 from scipy.sparse import csr_matrix, diags
+from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from ..landmarks.types import Landmarks
@@ -47,11 +55,14 @@ from ..scan import Scan
 from .affine import AffineParams, apply_affine, fit_affine, starts_from
 from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
+from .symmetry import MirrorTerm, mirror_term, plane_of_pairs, symmetry_plane
 
 
 @dataclass(frozen=True)
 class NonrigidParams:
-    """The paper's values are the defaults. correspondence: "auto" (grid for captures), "grid" or "kdtree"."""
+    """The paper's values are the defaults. correspondence: "auto" (grid for captures), "grid" or "kdtree";
+    symmetry: the mirror term's weight per vertex pair at the stiffest level (0: none), its plane read
+    off the scan points within symmetry_near_mm of the affine start."""
 
     point_to_point: float = 0.1
     point_to_plane: float = 1.0
@@ -70,6 +81,8 @@ class NonrigidParams:
     user_trust_mm: float = 2.2
     affine: AffineParams | None = AffineParams()
     coarse_gates: tuple[float, float] | None = (15.0, 60.0)
+    symmetry: float = 1.0
+    symmetry_near_mm: float = 8.0
 
 
 @dataclass(frozen=True)
@@ -121,12 +134,14 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, vf: csr_matrix | Non
 
 
 def register(
-    aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: Landmarks | None, params: NonrigidParams = NonrigidParams()
+    aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: Landmarks | None, params: NonrigidParams = NonrigidParams(),
+    mirror: np.ndarray | None = None,
 ) -> Registration:
     """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
-    weight if they agree with the face registered at the detected landmarks' (see above)."""
+    weight if they agree with the face registered at the detected landmarks' (see above). mirror: (n,)
+    each vertex's mirror pair on the template (`Template.mirror`), for the mirror term (None: none)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
-    setup = _setup(aligned, faces, scan, (lm_index, lm_target), params)  # both runs: one target, one affine start
+    setup = _setup(aligned, faces, scan, (lm_index, lm_target), params, mirror)  # both runs: one target, one affine start
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     first = _register(aligned, faces, setup, (lm_index, lm_target), factor, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
@@ -137,31 +152,43 @@ def register(
 
 class _Setup(NamedTuple):
     """What the elastic ICP needs besides its landmarks: the incidence matrix, the scan as a
-    target, the membrane's Laplacian and the affine start (n, 3) mm."""
+    target, the membrane's Laplacian, the affine start (n, 3) mm and the mirror term (or None)."""
 
     vf: csr_matrix
     target: Target
     lap: csr_matrix
     start: np.ndarray
+    mirror: MirrorTerm | None
 
 
-def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams) -> _Setup:
+def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams,
+           mirror: np.ndarray | None) -> _Setup:
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
-    return _Setup(vf, target, laplacian(aligned, faces), _affine_start(aligned, normals, target, landmarks, params))
+    start = _affine_start(aligned, normals, target, landmarks, params)
+    term = None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params)
+    return _Setup(vf, target, laplacian(aligned, faces), start, term)
+
+
+def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: NonrigidParams) -> MirrorTerm:
+    """The mirror term about the scan's plane of symmetry, found from the (n, 3) start's."""
+    near = np.isfinite(cKDTree(start).query(target.vertices, distance_upper_bound=params.symmetry_near_mm)[0])
+    plane = symmetry_plane(target.vertices[near], target.normals[near], plane_of_pairs(start, mirror))
+    return mirror_term(mirror, plane)
 
 
 def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
     """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's weight."""
-    vf, target, lap, start = setup
+    vf, target, lap, start, mirror = setup
     lm_index, lm_target = landmarks
     selector = np.zeros(len(aligned))
     selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
     mu, lam = params.membrane, params.landmark * factor
-    system = _System(w_data, lap, selector, mu, lam)
+    system = _System(w_data, lap, selector, mirror, params.symmetry / params.membrane)
+    system.refactor(mu, lam)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
@@ -172,7 +199,7 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
         pull = _data_targets(current, m, target, params)
         rhs = w_data * (pull - start)
         rhs[lm_index] += lam * (lm_target - start[lm_index])
-        new = system.solve(rhs)
+        new = system.solve(rhs, start)
         change = float(np.linalg.norm(new - disp) / max(np.linalg.norm(start + new - aligned), 1e-12))
         disp = new
         res = _plane_distance(current, m, target)[m.valid]
@@ -229,24 +256,41 @@ def _landmark_targets(landmarks: Landmarks | None, params: NonrigidParams):
 
 
 class _System:
-    """(w I + mu L + lam S) X = B for (n, 3) right-hand sides: a sparse LDL^T factorisation (QDLDL)
-    whose symbolic analysis is kept when mu and lam change (the sparsity pattern does not)."""
+    """(w I + mu L + lam S + k mu M) X = B for (n, 3) right-hand sides, M the mirror term (if any), k its
+    weight per unit of membrane: sparse LDL^T factorisations (QDLDL) whose symbolic analysis is kept
+    when mu and lam change (the sparsity pattern does not). Without a mirror term one matrix serves
+    x, y and z; with one, the system is solved in the plane's frame, one matrix across it, one along."""
 
-    def __init__(self, w_data: float, lap, selector: np.ndarray, mu: float, lam: float):
-        self.w_data, self.lap, self.selector = w_data, lap, selector
-        self.solver = qdldl.Solver(self.matrix(mu, lam))
-
-    def matrix(self, mu: float, lam: float):
-        return (diags(self.w_data + lam * self.selector) + mu * self.lap).tocsc()
+    def __init__(self, w_data: float, lap, selector: np.ndarray, mirror: MirrorTerm | None, k: float):
+        self.w_data, self.lap, self.selector, self.mirror, self.k = w_data, lap, selector, mirror, k
+        self.solvers, self.weight = None, 0.0
 
     def refactor(self, mu: float, lam: float) -> None:
-        self.solver.update(self.matrix(mu, lam))
+        base = diags(self.w_data + lam * self.selector) + mu * self.lap
+        self.weight = self.k * mu
+        matrices = [base] if self.mirror is None else [base + self.weight * self.mirror.across, base + self.weight * self.mirror.along]
+        if self.solvers is None:
+            self.solvers = [qdldl.Solver(m.tocsc()) for m in matrices]
+        else:
+            for solver, m in zip(self.solvers, matrices):
+                solver.update(m.tocsc())
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """x, y and z solved side by side (QDLDL releases the GIL; each column is independent)."""
+    def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`: x, y and z
+        solved side by side (QDLDL releases the GIL; each column is independent)."""
+        if self.mirror is None:
+            return self._columns(rhs, [self.solvers[0]] * 3)
+        m, w = self.mirror, self.weight
+        r, s = rhs @ m.frame.T, start @ m.frame.T  # in the plane's frame
+        r[:, 0] -= w * (m.across @ s[:, 0] - m.across_rhs)
+        r[:, 1:] -= w * (m.along @ s[:, 1:])
+        return self._columns(r, [self.solvers[0], self.solvers[1], self.solvers[1]]) @ m.frame
+
+    @staticmethod
+    def _columns(rhs: np.ndarray, solvers: list) -> np.ndarray:
         columns = [np.ascontiguousarray(rhs[:, k]) for k in range(3)]
         with ThreadPoolExecutor(max_workers=3) as pool:
-            return np.column_stack(list(pool.map(self.solver.solve, columns)))
+            return np.column_stack(list(pool.map(lambda sc: sc[0].solve(sc[1]), zip(solvers, columns))))
 
 
 def _data_targets(current: np.ndarray, m, target: Target, params: NonrigidParams) -> np.ndarray:

@@ -11,6 +11,7 @@ from importlib import resources
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from .regions import contact_region
@@ -27,12 +28,14 @@ class Template:
     vertices: (N, 3) float64 mm; faces: (M, 3) int64; vertex i < N_LANDMARKS is landmark i.
     regions: {"nasal" | "oronasal": ContactRegion}.
     features: {"lips" | "left_eye" | ...: (E, 2) int64 landmark edges} (MediaPipe's connections).
+    mirror: (N,) int64, the vertex at each vertex's mirror image across the midline (x = 0).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     regions: dict
     features: dict
+    mirror: np.ndarray
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -66,7 +69,8 @@ def load_template() -> Template:
     marks = _data("contact_regions.json")
     regions = {m: contact_region(m, vertices, faces, marks[m]["anchors"], marks[m]["half_width_mm"]) for m in MASKS}
     features = {k: np.asarray(v, dtype=np.int64) for k, v in _data("canonical_face.json")["features"].items()}
-    return Template(vertices=vertices, faces=faces, regions=regions, features=features)
+    mirror = cKDTree(vertices).query(vertices * [-1.0, 1.0, 1.0])[1]  # the canonical face is symmetric: exact pairs
+    return Template(vertices=vertices, faces=faces, regions=regions, features=features, mirror=mirror)
 
 
 def central_face(template: Template, radius_mm: float = 60.0) -> np.ndarray:
