@@ -18,7 +18,8 @@ the face's proportions can tell (`face_size`, `depth_ratio`: see the flagged and
 
 Usage: .venv/bin/python bench/robustness.py [--seeds 5] [--other-seeds N] [--first 100] [--workers 2] [--only NAME ...]
 (seeds 100+ by default: the quality gates were calibrated on seeds 0-13; --other-seeds: how many
-for the levels that are not moderate, default --seeds; --only: the conditions whose name contains NAME.)
+for the levels that are not moderate, default --seeds; --only: the rows whose condition and level,
+"name level", contain NAME, e.g. "yaw (deg) 20".)
 """
 
 import argparse
@@ -140,14 +141,14 @@ def main() -> None:
     ap.add_argument("--other-seeds", type=int, default=None)
     ap.add_argument("--first", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--only", action="append", default=None, help="run the conditions whose name contains this (repeatable)")
+    ap.add_argument("--only", action="append", default=None, help="run the rows whose 'condition level' contains this (repeatable)")
     args = ap.parse_args()
     other = args.seeds if args.other_seeds is None else args.other_seeds
     print(f"machine: {platform.machine()}, Python {platform.python_version()}; seeds from {args.first}: "
           f"{args.seeds} per moderate level, {other} per other level; nasal mask")
     results, reasons, t0 = {}, defaultdict(int), time.perf_counter()
-    jobs = [(c, seed) for c, (name, _, moderate, _) in enumerate(CONDITIONS)
-            if args.only is None or any(o in name for o in args.only)
+    jobs = [(c, seed) for c, (name, level, moderate, _) in enumerate(CONDITIONS)
+            if args.only is None or any(o in f"{name} {level}" for o in args.only)
             for seed in range(args.first, args.first + (args.seeds if moderate else other))]
     with ProcessPoolExecutor(args.workers) as pool:
         for (c, seed), row in zip(jobs, pool.map(one, jobs)):
