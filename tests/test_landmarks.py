@@ -531,22 +531,23 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
 
 
 def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape(tmp_path):
-    """Turned another way, subject 9's render gives landmarks (spread 8.8 mm) that put the oronasal
-    seal region 23 mm from the truth, the shape alone 1.2 mm: over 10 mm apart (21 mm over the mask
-    region), the design (and the landmarks command, which writes what a design uses) takes the
-    shape's placement, flagged landmark-free and saying why."""
+    """Turned another way, subject 9's render gives landmarks that put the oronasal seal region 23 mm
+    from the truth, the shape alone 1.2 mm. Their spread was 8.8 mm and the seal regions over 10 mm
+    apart; with the mirror term the face registered at their tenth weight lies nearer the truth and
+    the spread alone, 13.7 mm, is past 10 mm. Either way the design (and the landmarks command, which
+    writes what a design uses) takes the shape's placement, flagged landmark-free and saying why."""
     from cpapfit.pipeline import align, design, registered
 
     scan, truth = bare_subject(tmp_path, 9, 0)
     band = TEMPLATE.regions["oronasal"].band
     al, _, by_shape = registered(scan, align(scan))
     assert al.landmarks.path == "fallback" and by_shape is None
-    assert "placed the mask region a mean" in al.landmarks.rejected
+    assert "from their places on the registered face" in al.landmarks.rejected or "placed the mask region a mean" in al.landmarks.rejected
     d = design(scan, "oronasal")
     assert d.alignment.landmarks.path == "fallback"
     assert np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean() < 1.5
     (gate,) = [g for g in d.quality.flags if g.code == "landmark_free"]
-    assert "from where the face's shape alone places it" in gate.message
+    assert "shape alone" in gate.message
 
 
 def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, tmp_path, monkeypatch, cli):

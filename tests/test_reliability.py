@@ -185,11 +185,14 @@ def test_landmarks_off_along_the_skin_are_flagged_and_not_trusted(tmp_path, phan
 def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
     """Colour 12 px (~12 mm) to the side of the depth, a capture not registered: the detected
     landmarks are lifted onto the wrong skin and drag the seal ~2 mm along it. Their spread from
-    the face the geometry gives (8.4 mm against 2.3 unshifted) flags it, saying why."""
+    the face the geometry gives (10.4 mm against 2.3 unshifted; 8.4 before the mirror term, which
+    holds the face nearer the truth) flags it, saying why: past 7 mm as a spread, past 10 mm by
+    dropping them for the face's shape alone (landmark-free)."""
     codes, err = design_flags(tmp_path, with_colour_shift(phantom1, 12))
-    assert "landmark_spread_mm" in codes and "colour image may not line up with the depth" in err, err
-    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
-    assert fit["quality"]["landmark_spread_mm"] > GATES.detected_spread_flag_mm
+    assert {"landmark_spread_mm", "landmark_free"} & set(codes), err
+    assert "colour image may not line up with the depth" in err, err
+    quality = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
+    assert quality.get("landmark_spread_mm", np.inf) > GATES.detected_spread_flag_mm  # none recorded once they are dropped
 
 
 def test_a_colour_image_far_from_its_depth_is_designed_from_the_geometry(tmp_path, phantom1):
