@@ -187,8 +187,7 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
     selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
     mu, lam = params.membrane, params.landmark * factor
-    system = _System(w_data, lap, selector, mirror, params.symmetry / params.membrane)
-    system.refactor(mu, lam)
+    system = _System(w_data, lap, selector, mirror, params.symmetry / params.membrane, mu, lam)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
@@ -261,19 +260,21 @@ class _System:
     when mu and lam change (the sparsity pattern does not). Without a mirror term one matrix serves
     x, y and z; with one, the system is solved in the plane's frame, one matrix across it, one along."""
 
-    def __init__(self, w_data: float, lap, selector: np.ndarray, mirror: MirrorTerm | None, k: float):
+    def __init__(self, w_data: float, lap, selector: np.ndarray, mirror: MirrorTerm | None, k: float, mu: float, lam: float):
         self.w_data, self.lap, self.selector, self.mirror, self.k = w_data, lap, selector, mirror, k
-        self.solvers, self.weight = None, 0.0
+        self.solvers = [qdldl.Solver(m) for m in self._matrices(mu, lam)]
 
     def refactor(self, mu: float, lam: float) -> None:
+        """The same system at membrane weight mu and landmark weight lam (numeric factorisation only)."""
+        for solver, m in zip(self.solvers, self._matrices(mu, lam)):
+            solver.update(m)
+
+    def _matrices(self, mu: float, lam: float) -> list:
+        """The CSC matrices at (mu, lam): one, or across and along the plane; sets the mirror weight k mu."""
         base = diags(self.w_data + lam * self.selector) + mu * self.lap
         self.weight = self.k * mu
         matrices = [base] if self.mirror is None else [base + self.weight * self.mirror.across, base + self.weight * self.mirror.along]
-        if self.solvers is None:
-            self.solvers = [qdldl.Solver(m.tocsc()) for m in matrices]
-        else:
-            for solver, m in zip(self.solvers, matrices):
-                solver.update(m.tocsc())
+        return [m.tocsc() for m in matrices]
 
     def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`: x, y and z
