@@ -22,7 +22,7 @@ from .io.phantom import write_phantom
 from .io.summary import counts, summary_csv, summary_html
 from .io.units import UNIT_CHOICES
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
-from .jobs import design_job, user_landmarks
+from .jobs import ScanTask, design_folder, user_landmarks
 from .landmarks.types import Landmarks
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
@@ -128,7 +128,7 @@ def report_summary(out: Path, fit: dict) -> str:
 
 def cmd_design(args) -> int:
     with stage_display(args.quiet, args.verbose) as on_stage:
-        run = design_job(args.scan, args.out, args.mask, args.landmarks, args.units, on_stage, parallel=True)
+        run = design_folder(ScanTask(Path(args.scan), Path(args.out), args.mask, args.units), args.landmarks, on_stage, parallel=True)
     info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
     for warning in run.fit.get("warnings", []):
         info(f"rescan advised: {warning['message']}")
@@ -182,7 +182,7 @@ def cmd_demo(args) -> int:
         on_stage("synthetic subject")
         write_phantom(make_phantom(args.seed), subject)
         write_bytes(out / "template_regions.png", png_bytes(template_regions_picture(load_template())))
-        run = design_job(subject, out / "design", "nasal", on_stage=on_stage, parallel=True)
+        run = design_folder(ScanTask(subject, out / "design"), on_stage=on_stage, parallel=True)
     d, fit = run.design, run.fit
     summaries = {"scan": scan_summary(load_scan(subject)), "template": template_summary() + f" (picture: {out / 'template_regions.png'})"}
     summaries.update(alignment_summaries(d.alignment))
@@ -308,15 +308,26 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def one_line(*texts: str) -> str:
+    """The texts on one line, whatever their line breaks."""
+    return " ".join(" ".join(texts).split())
+
+
+def notes(exc: BaseException) -> list[str]:
+    """What was added to the exception on its way out (e.g. an earlier design removed: `jobs._clearing`)."""
+    return getattr(exc, "__notes__", [])
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except CpapfitError as exc:
-        print(f"cpapfit: error: {' '.join(str(exc).split())}", file=sys.stderr)  # one line, whatever the message
+        print(f"cpapfit: error: {one_line(str(exc), *notes(exc))}", file=sys.stderr)
         return EXIT_USER_ERROR
     except OSError as exc:  # an output path that is a file, a full disk, no permission
-        print(f"cpapfit: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        what = f"{exc.filename or ''}: {exc.strerror or exc}"
+        print(f"cpapfit: error: {one_line(what, *notes(exc))}", file=sys.stderr)
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("cpapfit: interrupted", file=sys.stderr)
@@ -324,8 +335,9 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # a bug, not the input: still one line, and nothing half-written (writes are atomic)
         if os.environ.get("CPAPFIT_TRACEBACK"):
             traceback.print_exc()
-        print(f"cpapfit: internal error: {type(exc).__name__}: {' '.join(str(exc).split())[:300]} -- nothing was written for "
-              "this step; please report it with the scan (CPAPFIT_TRACEBACK=1 prints the traceback)", file=sys.stderr)
+        message = f"{type(exc).__name__}: {one_line(str(exc))[:300]} -- nothing was written for this step; please report it with the scan"
+        print(f"cpapfit: internal error: {one_line(message, '(CPAPFIT_TRACEBACK=1 prints the traceback)', *notes(exc))}",
+              file=sys.stderr)
         return EXIT_INTERNAL_ERROR
 
 

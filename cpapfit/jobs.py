@@ -161,13 +161,12 @@ def run_scan(task: ScanTask) -> ScanResult:
     and leaves no outputs for the scan (stale ones from an earlier input are removed)."""
     start = time.perf_counter()
     try:
-        digest = content_hash(task)
-        kept = _kept_fit(task.out, digest)
-        fit = kept if kept is not None else _build(task, digest, start)
+        with _clearing(task.out):
+            digest = content_hash(task)
+            kept = _kept_fit(task.out, digest)
+            fit = kept if kept is not None else _build(task, digest, start)
         return _result(task.out.name, "unchanged" if kept is not None else "designed", fit, time.perf_counter() - start)
     except Exception as exc:  # one scan's failure, whatever it is, is its row and never the batch's end
-        if _owned(task.out):
-            shutil.rmtree(task.out)
         message = str(exc) if isinstance(exc, CpapfitError) else f"internal error {type(exc).__name__}: {exc}"
         return ScanResult(task.out.name, "failed", time.perf_counter() - start, error=message)
 
@@ -180,7 +179,7 @@ def _result(name: str, status: str, fit: dict, seconds: float) -> ScanResult:
 
 
 def _owned(folder: Path) -> bool:
-    """True when `folder` was made by a batch job (it has a manifest)."""
+    """True when `folder` was made by cpapfit design or batch (it has a manifest)."""
     return (folder / MANIFEST).is_file()
 
 
@@ -195,27 +194,58 @@ def _kept_fit(folder: Path, digest: str) -> dict | None:
 
 
 def _build(task: ScanTask, digest: str, start: float) -> dict:
-    """Design into a hidden staging folder, write the manifest last, rename into place; the fit."""
-    if task.out.exists() and not _owned(task.out):
-        raise InputError(f"{task.out}: exists and was not made by cpapfit batch; move it away or choose another --out")
+    """The batch's design of `task` into its folder, its manifest stamped with the content hash and the time; the fit."""
+    return _design_folder(task, lambda: {"hash": digest, "seconds": round(time.perf_counter() - start, 2)}).fit
+
+
+def design_folder(task: ScanTask, landmarks_path: str | Path | None = None, on_stage: Callable[[str], None] = _silent,
+                  parallel: bool = False) -> DesignRun:
+    """`cpapfit design`: `task` designed into its folder as one set, which then holds this scan's
+    complete outputs (`manifest.json` lists them) or, on any failure, nothing of an earlier design."""
+    with _clearing(task.out):
+        return _design_folder(task, dict, landmarks_path, on_stage, parallel)
+
+
+def _design_folder(task: ScanTask, stamp: Callable[[], dict], landmarks_path=None, on_stage=_silent, parallel=False) -> DesignRun:
+    """Design into a hidden staging folder, write the manifest (with `stamp()`) last, rename it into
+    place of the folder, which must be new, empty or an earlier cpapfit design."""
+    if task.out.exists() and not (_owned(task.out) or _empty_folder(task.out)):
+        raise InputError(f"{task.out}: exists and is not a cpapfit design folder (no {MANIFEST}); move it away or choose another --out")
     staging = _hidden(task.out, "tmp")
     staging.mkdir(parents=True)
     try:
-        run = design_job(task.scan, staging, task.mask, units=task.units)
+        run = design_job(task.scan, staging, task.mask, landmarks_path, task.units, on_stage, parallel)
         manifest = {
-            "hash": digest, "cpapfit_version": __version__, "scan": str(task.scan),
-            "parameters": {"mask": task.mask, "units": task.units}, "files": list(run.files),
-            "seconds": round(time.perf_counter() - start, 2),
+            "cpapfit_version": __version__, "scan": str(task.scan), "files": list(run.files),
+            "parameters": {"mask": task.mask, "units": task.units, "landmarks": None if landmarks_path is None else str(landmarks_path)},
         }
-        write_bytes(staging / MANIFEST, json_bytes(manifest))
+        write_bytes(staging / MANIFEST, json_bytes(manifest | stamp()))
         _replace_folder(staging, task.out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return run.fit
+    return run
+
+
+@contextlib.contextmanager
+def _clearing(folder: Path):
+    """On a failure inside, an earlier cpapfit design in `folder` is removed (and the error notes it),
+    so that it cannot be taken for the design of the scan that failed."""
+    try:
+        yield
+    except Exception as exc:
+        if _owned(folder):
+            shutil.rmtree(folder)
+            exc.add_note(f"(the earlier design in {folder} was removed: it was not made from this scan)")
+        raise
+
+
+def _empty_folder(path: Path) -> bool:
+    return path.is_dir() and not any(path.iterdir())
 
 
 def _hidden(folder: Path, kind: str) -> Path:
     """A fresh hidden sibling of `folder` for staging ("tmp") or for the outputs it replaces ("old")."""
+    folder = folder.absolute()
     return folder.with_name(f".{folder.name}.{kind}-{uuid.uuid4().hex[:8]}")
 
 

@@ -142,6 +142,24 @@ def test_a_bug_gives_one_line_and_writes_nothing(cli, tmp_path, phantom1_dir, mo
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_a_refused_scan_removes_the_earlier_design_in_its_folder_and_says_so(cli, tmp_path):
+    """A folder holding an earlier design (its manifest) and a scan that is refused: the folder
+    must not go on holding a cushion that reads as this scan's."""
+    out = tmp_path / "patient"
+    out.mkdir()
+    (out / "manifest.json").write_text(json.dumps({"files": ["cushion.stl"]}))
+    (out / "cushion.stl").write_text("the earlier scan's cushion")
+    (tmp_path / "empty.ply").write_bytes(b"")
+    assert_one_line_error(*cli("design", tmp_path / "empty.ply", "--out", out), "empty", f"earlier design in {out} was removed")
+    assert not out.exists()
+
+
+def test_a_design_into_a_folder_of_other_files_is_refused_and_leaves_them(cli, tmp_path, phantom1_dir):
+    (tmp_path / "notes.txt").write_text("the clinic's own file")
+    assert_one_line_error(*cli("design", phantom1_dir, "--out", tmp_path), "not a cpapfit design folder", "another --out")
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"] and (tmp_path / "notes.txt").read_text() == "the clinic's own file"
+
+
 def test_console_entry_point_prints_no_traceback(tmp_path):
     res = subprocess.run(
         [sys.executable, "-m", "cpapfit", "inspect", str(tmp_path / "missing.obj")], capture_output=True, text=True

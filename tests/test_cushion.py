@@ -59,11 +59,17 @@ def test_adult_dimensions_and_256_control_points(designed):
 
 
 def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
+    """... in place of an earlier design in the folder (its files that this one does not write are gone)."""
     out = tmp_path / "out"
+    out.mkdir()
+    (out / "manifest.json").write_text(json.dumps({"files": ["cushion.stl", "cushion_v1.stl"]}))
+    (out / "cushion_v1.stl").write_text("an earlier design's file")
     code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--verbose", "--out", out)
     assert code == 0, err
     assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
-    names = {p.name for p in out.iterdir()}
+    manifest = json.loads((out / "manifest.json").read_text())
+    names = {p.name for p in out.iterdir()} - {"manifest.json"}
+    assert set(manifest["files"]) == names and manifest["parameters"]["mask"] == "oronasal"
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
                      "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
                      "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png",
