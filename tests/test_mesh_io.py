@@ -47,6 +47,18 @@ def test_obj_texture_and_vertex_colours(tmp_path, face_m):
     assert scan.colors is not None and (scan.colors == [10, 200, 30]).all()
 
 
+def test_ply_face_colours_are_read_as_vertex_colours(tmp_path, face_m):
+    """Colour per triangle (red on the left half, green on the right): each vertex gets its
+    triangles' mean, so the colour renders the landmarks are found on keep it."""
+    left = face_m.triangles_center[:, 0] < 0
+    colours = np.where(left[:, None], [220, 20, 20, 255], [20, 220, 20, 255]).astype(np.uint8)
+    trimesh.Trimesh(face_m.vertices, face_m.faces, face_colors=colours, process=False).export(tmp_path / "faces.ply")
+    scan = load_scan(tmp_path / "faces.ply")
+    x = scan.vertices[:, 0] / 1000
+    assert scan.colors is not None
+    assert (scan.colors[x < -0.01] == [220, 20, 20]).all() and (scan.colors[x > 0.01] == [20, 220, 20]).all()
+
+
 def test_every_triangle_with_its_own_corners_is_joined_into_a_surface(tmp_path, face_m):
     """A triangle soup (each triangle's corners stored apart, as some exporters write), coloured by
     height: read as the surface it is, every corner at one place one vertex, colours kept; a

@@ -181,7 +181,7 @@ def _appearance(geom, n: int):
         return (colors[:, :3].astype(np.uint8) if len(colors) == n else None), None, None
     visual = getattr(geom, "visual", None)
     kind = getattr(visual, "kind", None)
-    if kind == "vertex":
+    if kind in ("vertex", "face"):  # face colours (a PLY's): each vertex the mean of its triangles' (trimesh)
         return np.asarray(visual.vertex_colors)[:, :3].astype(np.uint8), None, None
     if kind == "texture" and visual.uv is not None and len(visual.uv) == n:
         image = getattr(visual.material, "image", None) or getattr(visual.material, "baseColorTexture", None)
