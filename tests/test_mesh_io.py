@@ -47,6 +47,25 @@ def test_obj_texture_and_vertex_colours(tmp_path, face_m):
     assert scan.colors is not None and (scan.colors == [10, 200, 30]).all()
 
 
+def test_a_textured_obj_of_quads_keeps_its_texture(tmp_path):
+    """Scanners export quads ("f 1/1 2/2 3/3 4/4"): their texture coordinates are read (trimesh
+    before 4.6.11 dropped them, and the face was rendered without its colours)."""
+    n = 20
+    x, y = np.meshgrid(np.linspace(-50, 50, n), np.linspace(-60, 60, n))
+    z = 40 * np.exp(-(x**2 + y**2) / 2000)
+    uv = np.column_stack([(x.ravel() + 50) / 100, (y.ravel() + 60) / 120])
+    Image.fromarray(np.full((8, 8, 3), [200, 150, 120], dtype=np.uint8)).save(tmp_path / "skin.png")
+    (tmp_path / "face.mtl").write_text("newmtl skin\nmap_Kd skin.png\n")
+    quads = [(i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j) for i in range(n - 1) for j in range(n - 1)]
+    lines = ["mtllib face.mtl", "usemtl skin"] + [f"v {a:.4f} {b:.4f} {c:.4f}" for a, b, c in zip(x.ravel(), y.ravel(), z.ravel())]
+    lines += [f"vt {u:.5f} {v:.5f}" for u, v in uv] + ["f " + " ".join(f"{k + 1}/{k + 1}" for k in q) for q in quads]
+    (tmp_path / "face.obj").write_text("\n".join(lines) + "\n")
+    scan = load_scan(tmp_path / "face.obj", units="mm")
+    assert len(scan.faces) == 2 * len(quads) and scan.texture is not None and scan.texture.shape == (8, 8, 3)
+    at = np.round((scan.vertices[:, :2] + [50, 60]) / [100 / (n - 1), 120 / (n - 1)]).astype(int)  # grid (column, row)
+    assert np.abs(scan.uv - uv[at[:, 1] * n + at[:, 0]]).max() < 1e-4
+
+
 def test_ply_face_colours_are_read_as_vertex_colours(tmp_path, face_m):
     """Colour per triangle (red on the left half, green on the right): each vertex gets its
     triangles' mean, so the colour renders the landmarks are found on keep it."""
