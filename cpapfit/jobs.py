@@ -235,7 +235,7 @@ def _clearing(folder: Path):
     except Exception as exc:
         if _owned(folder):
             shutil.rmtree(folder)
-            exc.add_note(f"(the earlier design in {folder} was removed: it was not made from this scan)")
+            exc.add_note(f"(the earlier design in {folder} was removed, so that it cannot be taken for this run's)")
         raise
 
 
