@@ -43,12 +43,12 @@ def scan_to_template(scan, vertices):
     return metrics.scan_to_template(scan.vertices, vertices, TEMPLATE.faces, REGION)
 
 
-PAPER = NonrigidParams(affine=None, detected_landmark_factor=1.0, coarse_gates=None)  # the paper's method, no additions
+PAPER = NonrigidParams(affine=None, detected_landmark_factor=1.0, coarse_gates=None, symmetry=0)  # the paper's method, no additions
 
 
 def timed_register(aligned, scan, al, mode, params=NonrigidParams()):
     t0 = time.perf_counter()
-    reg = register(aligned, TEMPLATE.faces, scan, al.landmarks, replace(params, correspondence=mode))
+    reg = register(aligned, TEMPLATE.faces, scan, al.landmarks, replace(params, correspondence=mode), mirror=TEMPLATE.mirror)
     return reg, time.perf_counter() - t0
 
 
