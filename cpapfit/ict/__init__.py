@@ -1,0 +1,89 @@
+"""The ICT Face Model Light (USC Institute for Creative Technologies, MIT licence): an independent
+population of faces, none of them a deformation of the template.
+
+A face is neutral + sum_k w_k identity_k (w_k ~ N(0, 1)) + sum_e a_e expression_e, on the model's
+own topology: 14 388 vertices, the face area (0..9408, with the insides of the nostrils and of the
+lips), head and neck (9409..11247) and the eyeballs (11248..). The package keeps the first 40 of
+the 100 identity modes, 97.0 % of the identity variance over the face area, and the mouth and jaw
+expressions, both as float16 (largest rounding error 0.016 mm); `tools/build_ict_data.py` makes
+the file. Frame: the template's (x to the subject's left, y up, z out of the face; mm): the model
+turned and moved rigidly, no scale, so that its landmarks lie best on the template's.
+"""
+
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+
+import numpy as np
+
+from ..frozen import freeze_arrays
+
+EXPRESSIONS = (
+    "jawOpen", "mouthClose", "jawLeft", "jawRight", "jawForward", "mouthLowerDown_L", "mouthLowerDown_R",
+    "mouthFunnel", "mouthStretch_L", "mouthStretch_R",
+)
+"""The expressions kept (ARKit names), full strength at weight 1 (jawOpen drops the lower lip ~35 mm)."""
+
+MULTIPIE_TO_FACEMESH = {
+    27: 168, 28: 197, 30: 4, 31: 98, 32: 97, 33: 2, 34: 326, 35: 327,
+    36: 33, 39: 133, 42: 362, 45: 263, 48: 61, 51: 0, 54: 291, 57: 17, 62: 13, 66: 14,
+}
+"""Multi-PIE / iBUG 68 landmark -> the Face Mesh landmark of the same definition (the template's
+vertex): nose bridge and tip, nose base, eye corners, mouth corners, lip mid-points. From the usual
+mapping (PeizhiYan/Mediapipe_2_Dlib_Landmarks); left out where the two definitions disagree, their
+residual after a similarity fit on the neutral an outlier: 29 (mid nose ridge, 5.5 mm) and 8
+(chin: the template's lowest point is not the menton, 6.9 mm)."""
+
+
+@dataclass(frozen=True)
+class IctModel:
+    """The compact ICT face model, template frame, mm.
+
+    neutral: (V, 3) float64; identity: (K, V, 3) float64 modes, a face's weights ~ N(0, 1);
+    expressions: (E, V, 3) float64 at full strength, named `expression_names` (E,);
+    triangles: (T, 3) int64; landmarks: (68,) int64 vertex of each Multi-PIE landmark;
+    face_vertices: vertices below it are the face area; head_vertices: those from face_vertices
+    to below it are head and neck, the rest the eyeballs.
+    identity_share: the share of the full model's identity variance (face area) the K modes hold.
+    """
+
+    neutral: np.ndarray
+    identity: np.ndarray
+    expressions: np.ndarray
+    expression_names: tuple[str, ...]
+    triangles: np.ndarray
+    landmarks: np.ndarray
+    face_vertices: int
+    head_vertices: int
+    identity_share: float
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    @property
+    def face_triangles(self) -> np.ndarray:
+        """(T_face, 3) int64 triangles of the face area alone."""
+        return self.triangles[(self.triangles < self.face_vertices).all(axis=1)]
+
+
+@lru_cache(maxsize=1)
+def load_ict() -> IctModel:
+    """The shipped model (`data/ict_face.npz`)."""
+    with resources.files(__package__).joinpath("data", "ict_face.npz").open("rb") as f, np.load(f) as data:
+        return IctModel(
+            neutral=data["neutral_mm"].astype(np.float64), identity=data["identity_mm"].astype(np.float64),
+            expressions=data["expression_mm"].astype(np.float64), expression_names=tuple(str(n) for n in data["expression_names"]),
+            triangles=data["triangles"].astype(np.int64), landmarks=data["landmarks_multipie68"].astype(np.int64),
+            face_vertices=int(data["face_area_vertices"]), head_vertices=int(data["head_vertices"]),
+            identity_share=float(data["identity_share"]),
+        )
+
+
+def ict_face(model: IctModel, identity_weights: np.ndarray, expression: dict[str, float]) -> np.ndarray:
+    """(V, 3) float64 mm vertices of the face with (k,) identity weights (k <= K: the first k
+    modes) and {expression name: weight} (template frame)."""
+    w = np.asarray(identity_weights, dtype=np.float64)
+    face = model.neutral + np.tensordot(w, model.identity[: len(w)], axes=1)
+    for name, weight in expression.items():
+        face = face + weight * model.expressions[model.expression_names.index(name)]
+    return face
