@@ -10,6 +10,7 @@ the file. Frame: the template's (x to the subject's left, y up, z out of the fac
 turned and moved rigidly, no scale, so that its landmarks lie best on the template's.
 """
 
+import io
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
@@ -25,15 +26,16 @@ EXPRESSIONS = (
 """The expressions kept (ARKit names), full strength at weight 1 (jawOpen drops the lower lip ~35 mm)."""
 
 MULTIPIE_TO_FACEMESH = {
-    27: 168, 28: 197, 30: 4, 31: 98, 32: 97, 33: 2, 34: 326, 35: 327,
-    36: 33, 39: 133, 42: 362, 45: 263, 48: 61, 51: 0, 54: 291, 57: 17, 62: 13, 66: 14,
+    27: 168, 30: 4, 31: 98, 32: 97, 33: 2, 34: 326, 35: 327, 36: 33, 39: 133, 42: 362, 45: 263,
+    48: 61, 51: 0, 54: 291, 57: 17, 62: 13,
 }
 """Multi-PIE / iBUG 68 landmark -> the Face Mesh landmark of the same definition (the template's
-vertex): nose bridge and tip, nose base, eye corners, mouth corners, lip mid-points. From the usual
-mapping (PeizhiYan/Mediapipe_2_Dlib_Landmarks); left out where the two definitions disagree, their
-residual after a similarity fit on the neutral an outlier: 29 (mid nose ridge, 5.5 mm) and 8
-(chin: the template's lowest point is not the menton, 6.9 mm)."""
-
+vertex): nose bridge and tip, nose base, eye corners, mouth corners, lip mid-points, from the usual
+mapping (PeizhiYan/Mediapipe_2_Dlib_Landmarks). Left out where the definitions disagree, their
+residual an outlier (`tools/build_template_on_ict.py`): after the similarity fit on the neutral,
+8 (chin: the template's lowest point is not the menton) and 29 (mid nose ridge); on the registered
+face, 28 (upper nose ridge) and 66 (lower inner lip: the template's lips are apart, the model's
+closed)."""
 
 @dataclass(frozen=True)
 class IctModel:
@@ -61,15 +63,22 @@ class IctModel:
         freeze_arrays(self)
 
     @property
-    def face_triangles(self) -> np.ndarray:
-        """(T_face, 3) int64 triangles of the face area alone."""
-        return self.triangles[(self.triangles < self.face_vertices).all(axis=1)]
+    def face_and_eyes(self) -> np.ndarray:
+        """(T',) int64 indices of the triangles of the face area and of the eyeballs (the face as
+        a scanner sees it, without head and neck)."""
+        t = self.triangles
+        return np.flatnonzero((t < self.face_vertices).all(axis=1) | (t >= self.head_vertices).all(axis=1))
+
+
+def _data(name: str):
+    """A shipped npz file (`data/name`), read."""
+    return np.load(io.BytesIO(resources.files(__package__).joinpath("data", name).read_bytes()))
 
 
 @lru_cache(maxsize=1)
 def load_ict() -> IctModel:
     """The shipped model (`data/ict_face.npz`)."""
-    with resources.files(__package__).joinpath("data", "ict_face.npz").open("rb") as f, np.load(f) as data:
+    with _data("ict_face.npz") as data:
         return IctModel(
             neutral=data["neutral_mm"].astype(np.float64), identity=data["identity_mm"].astype(np.float64),
             expressions=data["expression_mm"].astype(np.float64), expression_names=tuple(str(n) for n in data["expression_names"]),
@@ -87,3 +96,23 @@ def ict_face(model: IctModel, identity_weights: np.ndarray, expression: dict[str
     for name, weight in expression.items():
         face = face + weight * model.expressions[model.expression_names.index(name)]
     return face
+
+
+@lru_cache(maxsize=1)
+def template_on_ict() -> tuple[np.ndarray, np.ndarray]:
+    """Every template vertex as a point of the ICT topology (`data/template_on_ict.npz`): its (N,)
+    int64 ICT triangle and (N, 3) float64 barycentric coordinates there (N = 28 881, the template's
+    vertex order): the closest point of the ICT neutral's skin (the eyeball in the eye openings) to
+    the template registered onto it (`tools/build_template_on_ict.py`)."""
+    with _data("template_on_ict.npz") as data:
+        triangle, bary = data["triangle"].astype(np.int64), data["bary"].astype(np.float64)
+    triangle.flags.writeable = bary.flags.writeable = False
+    return triangle, bary
+
+
+def template_truth(ict_vertices: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 mm: where every template vertex is on the ICT face of (V, 3) mm vertices (any
+    identity, expression or pose: the same topology), on its triangles exactly."""
+    triangle, bary = template_on_ict()
+    a, b, c = (np.asarray(ict_vertices, dtype=np.float64)[load_ict().triangles[triangle, k]] for k in range(3))
+    return a + bary[:, 1:2] * (b - a) + bary[:, 2:3] * (c - a)
