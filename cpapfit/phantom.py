@@ -118,8 +118,7 @@ def make_phantom(
         identity = {**identity, "glasses": True}
     intrinsics = random_intrinsics(rng)
     surface, placed = place_in_view(face, template, intrinsics, rng, yaw_deg, distance_mm, pose)
-    seen = np.vstack([surface, (np.asarray(worn.vertices).reshape(-1, 3) - placed["template_centre_mm"]) @ np.array(placed["rotation"]).T
-                      + placed["translation_mm"]])
+    seen = np.vstack([surface, to_camera(np.asarray(worn.vertices).reshape(-1, 3), placed)])
     triangles = np.vstack([template.faces, np.asarray(worn.faces, dtype=np.int64).reshape(-1, 3) + len(surface)])
     hits = raycast(seen, triangles, intrinsics)
     image = colour_image(hits, seen, triangles, template, rng, mouth)
@@ -246,20 +245,47 @@ def place_in_view(
     return local + translation, placed
 
 
-def skin_albedo(template: Template, rng: np.random.Generator) -> np.ndarray:
-    """(N, 3) albedo in [0, 1]: a random skin tone, redder lips, dark brows, eyes with irises."""
-    v = template.vertices
+def to_camera(points: np.ndarray, placed: dict) -> np.ndarray:
+    """(K, 3) mm template-frame points in the camera frame of a `place_in_view` pose dict."""
+    return (points - placed["template_centre_mm"]) @ np.array(placed["rotation"]).T + placed["translation_mm"]
+
+
+LIP_TINT = np.array([0.85, 0.55, 0.55])  # lips: the skin's albedo times this
+BROW_SHADE = 0.35  # brows: the skin's albedo times this
+SCLERA = np.array([0.9, 0.9, 0.88])
+IRIS = np.array([0.25, 0.16, 0.1])
+
+
+def skin_tone(rng: np.random.Generator) -> np.ndarray:
+    """(3,) albedo in [0, 1] of a random skin tone, from light to dark."""
     tone = rng.uniform(0.0, 1.0)
-    skin = (1 - tone) * np.array([0.92, 0.74, 0.64]) + tone * np.array([0.45, 0.30, 0.22])
-    albedo = np.tile(skin, (len(v), 1))
-    albedo[_inside(template, "lips")] = skin * np.array([0.85, 0.55, 0.55])
-    for brow in ("left_eyebrow", "right_eyebrow"):
-        albedo[_near_edges(template, brow, 4.0)] = skin * 0.35
+    return (1 - tone) * np.array([0.92, 0.74, 0.64]) + tone * np.array([0.45, 0.30, 0.22])
+
+
+def face_regions(template: Template) -> dict[str, np.ndarray]:
+    """{"lips" | "brows" | "eyes" | "iris": (N,) bool} template vertices of each coloured region
+    (frontal x, y: inside the lips' and eyes' landmarks, within 4 mm of the brows' landmark edges,
+    within 5.5 mm of an eye's centre)."""
+    v = template.vertices
+    eyes, iris = np.zeros(len(v), dtype=bool), np.zeros(len(v), dtype=bool)
     for eye in ("left_eye", "right_eye"):
         inside = _inside(template, eye)
-        iris = np.linalg.norm(v[:, :2] - template.landmarks[template.features[eye].ravel(), :2].mean(axis=0), axis=1) < 5.5
-        albedo[inside] = [0.9, 0.9, 0.88]
-        albedo[inside & iris] = [0.25, 0.16, 0.1]
+        centre = template.landmarks[template.features[eye].ravel(), :2].mean(axis=0)
+        eyes |= inside
+        iris |= inside & (np.linalg.norm(v[:, :2] - centre, axis=1) < 5.5)
+    brows = _near_edges(template, "left_eyebrow", 4.0) | _near_edges(template, "right_eyebrow", 4.0)
+    return {"lips": _inside(template, "lips"), "brows": brows, "eyes": eyes, "iris": iris}
+
+
+def skin_albedo(template: Template, rng: np.random.Generator) -> np.ndarray:
+    """(N, 3) albedo in [0, 1]: a random skin tone, redder lips, dark brows, eyes with irises."""
+    skin = skin_tone(rng)
+    regions = face_regions(template)
+    albedo = np.tile(skin, (len(template.vertices), 1))
+    albedo[regions["lips"]] = skin * LIP_TINT
+    albedo[regions["brows"]] = skin * BROW_SHADE
+    albedo[regions["eyes"]] = SCLERA
+    albedo[regions["iris"]] = IRIS
     return albedo
 
 
@@ -283,12 +309,24 @@ def colour_image(hits: Hits, seen: np.ndarray, triangles: np.ndarray, template: 
     """(H, W, 3) uint8 shaded colour image with a random light and mild sensor noise of the face
     (its first N vertices of `seen`, the template's) and anything worn on it (the rest, in FRAME's
     colour); the (N,) bool `mouth` vertices are the dark inside of an open mouth."""
-    light = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.6, 0.1), -1.0])
-    background = rng.uniform(0.35, 0.75) * np.array([1.0, 1.02, 1.06])
+    light, background = random_light(rng)
     albedo = skin_albedo(template, rng)
     albedo[mouth] = MOUTH_INSIDE
     albedo = np.vstack([albedo, np.tile(FRAME, (len(seen) - len(albedo), 1))])
-    image = shade(hits, seen, triangles, albedo, light=light, background=background)
+    return camera_image(hits, seen, triangles, albedo, light, background, rng)
+
+
+def random_light(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """((3,) direction towards a random light, camera frame; (3,) background colour in [0, 1])."""
+    light = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.6, 0.1), -1.0])
+    return light, rng.uniform(0.35, 0.75) * np.array([1.0, 1.02, 1.06])
+
+
+def camera_image(hits: Hits, vertices: np.ndarray, triangles: np.ndarray, albedo: np.ndarray, light: np.ndarray,
+                 background: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """(H, W, 3) uint8 colour image of a mesh ((N, 3) mm camera frame, (N, 3) albedo in [0, 1])
+    shaded by `light` over `background`, with mild sensor noise."""
+    image = shade(hits, vertices, triangles, albedo, light=light, background=background)
     noisy = image.astype(np.float64) + rng.normal(0.0, 2.0, image.shape)
     return np.clip(np.round(noisy), 0, 255).astype(np.uint8)
 
