@@ -49,7 +49,7 @@ def main() -> None:
     repeat = parser.parse_args().repeat
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     with tempfile.TemporaryDirectory() as tmp:
-        run("phantom", "--seed", "3", "--out", f"{tmp}/p3")
+        run("phantom", "--seed", "3", "--population", "template", "--out", f"{tmp}/p3")
         dense_mesh(Path(tmp) / "dense.ply")
         cases = [("phantom seed 3", f"{tmp}/p3", mask) for mask in ("nasal", "oronasal")]
         cases.append(("phantom seed 3 as a dense mesh", f"{tmp}/dense.ply", "nasal"))

@@ -18,12 +18,13 @@ from .io import load_scan
 from .io.cushion import load_cushion
 from .io.landmarks import landmarks_record
 from .io.design import evaluation_record, registration_ply
-from .io.phantom import write_phantom
+from .io.phantom import write_head_mesh, write_phantom
 from .io.summary import counts, summary_csv, summary_html
 from .io.units import UNIT_CHOICES
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import ScanTask, design_folder, user_landmarks
 from .landmarks.types import Landmarks
+from .ict.phantom import ict_head_mesh, make_ict_phantom
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
 from .pipeline import Alignment, align, evaluate, face_for, missing_stages, registered, stage_table
@@ -202,10 +203,20 @@ def cmd_demo(args) -> int:
 def cmd_phantom(args) -> int:
     if not 0.0 <= args.mouth_open <= 30.0:
         raise InputError(f"--mouth-open {args.mouth_open:g}: give 0-30 mm")
-    files = write_phantom(make_phantom(args.seed, mouth_open_mm=args.mouth_open, glasses=args.glasses), Path(args.out))
+    if args.glasses and args.population != "template":
+        raise InputError("--glasses: only the template population wears glasses (--population template)")
+    if args.mesh and args.population != "ict":
+        raise InputError("--mesh: only the ICT population gives head meshes (--population ict)")
+    if args.mesh:
+        files = write_head_mesh(ict_head_mesh(args.seed, mouth_open_mm=args.mouth_open), Path(args.out))
+    elif args.population == "ict":
+        files = write_phantom(make_ict_phantom(args.seed, mouth_open_mm=args.mouth_open), Path(args.out))
+    else:
+        files = write_phantom(make_phantom(args.seed, mouth_open_mm=args.mouth_open, glasses=args.glasses), Path(args.out))
+    kind = "head mesh" if args.mesh else "RGB-D subject"
     opened = f", mouth open {args.mouth_open:g} mm" if args.mouth_open else ""
     worn = ", wearing glasses" if args.glasses else ""
-    info(f"wrote synthetic subject seed {args.seed}{opened}{worn}: {len(files)} files in {args.out}")
+    info(f"wrote synthetic {args.population} {kind} seed {args.seed}{opened}{worn}: {len(files)} files in {args.out}")
     return 0
 
 
@@ -255,12 +266,16 @@ def build_parser() -> argparse.ArgumentParser:
     add_progress_options(p)
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("phantom", help="write a synthetic RGB-D subject with ground truth")
+    p = sub.add_parser("phantom", help="write a synthetic RGB-D subject (or head mesh) with ground truth")
     p.add_argument("--seed", type=int, required=True)
-    p.add_argument("--out", required=True, help="output capture folder")
+    p.add_argument("--out", required=True, help="output folder: the capture (or head.ply) and ground_truth/")
+    p.add_argument("--population", default="ict", choices=["ict", "template"],
+                   help="ict: a face of the ICT face model (default); template: the template face deformed")
     p.add_argument("--mouth-open", type=float, default=0.0, metavar="MM",
                    help="drop the jaw: the lower lip moves this far, mm (default 0: closed)")
-    p.add_argument("--glasses", action="store_true", help="put a glasses frame on the face (seen by the camera, not in the truth)")
+    p.add_argument("--glasses", action="store_true",
+                   help="put a glasses frame on the face (seen by the camera, not in the truth; template population)")
+    p.add_argument("--mesh", action="store_true", help="write the head as a mesh scan (head.ply, mm) instead of a capture (ict population)")
     p.set_defaults(func=cmd_phantom)
 
     scan_help = "mesh file (PLY, OBJ, STL, OFF, GLB) or RGB-D capture folder"

@@ -1,39 +1,65 @@
-"""A synthetic subject on disk: an RGB-D capture folder plus its ground truth."""
+"""A synthetic subject on disk: an RGB-D capture folder or a head mesh, plus its ground truth."""
 
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from .. import __version__
+from ..ict.phantom import HeadMesh
 from ..phantom import Phantom
 from ..rgbd import project
-from ..template import N_LANDMARKS
+from ..template import N_LANDMARKS, load_template
 from .capture import capture_files
 from .write import json_bytes, ply_bytes, write_files
 
 TRUTH = "ground_truth"
+HEAD = "head.ply"
+
+
+def truth_files(surface: np.ndarray, faces: np.ndarray, frame: str, subject: dict, pixels: np.ndarray | None = None) -> dict[str, bytes]:
+    """{relative name: bytes} of a subject's truth: ground_truth/surface.ply ((N, 3) mm template-order
+    `surface` with (M, 3) `faces`, in `frame`), ground_truth/landmarks.json (its first 468 vertices,
+    and their (468, 2) image `pixels` if given) and ground_truth/subject.json (`subject`)."""
+    landmarks = {
+        "units": "mm", "frame": frame,
+        "points": np.round(surface[:N_LANDMARKS], 6).tolist(),
+        "template_index": list(range(N_LANDMARKS)),
+    }
+    if pixels is not None:
+        landmarks["pixels"] = np.round(pixels, 3).tolist()
+    return {
+        f"{TRUTH}/surface.ply": ply_bytes(surface, faces),
+        f"{TRUTH}/landmarks.json": json_bytes(landmarks),
+        f"{TRUTH}/subject.json": json_bytes(subject),
+    }
 
 
 def phantom_files(ph: Phantom) -> dict[str, bytes]:
-    """{relative name: bytes} of the capture (color.png, depth.png, intrinsics.json) and its truth:
-    ground_truth/surface.ply (template vertex order, camera frame, mm), ground_truth/landmarks.json
-    and ground_truth/subject.json (seed, identity, pose, sensor model)."""
+    """{relative name: bytes} of the capture (color.png, depth.png, intrinsics.json) and its truth
+    (`truth_files`: camera frame; subject.json holds seed, identity, pose, sensor model)."""
     files = capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale)
-    files[f"{TRUTH}/surface.ply"] = ply_bytes(ph.surface, ph.faces)
-    files[f"{TRUTH}/landmarks.json"] = json_bytes({
-        "units": "mm", "frame": "camera (x right, y down, z forward)",
-        "points": np.round(ph.landmarks, 6).tolist(),
-        "template_index": list(range(N_LANDMARKS)),
-        "pixels": np.round(project(ph.landmarks, ph.intrinsics), 3).tolist(),
-    })
-    files[f"{TRUTH}/subject.json"] = json_bytes({
-        "seed": ph.seed, "cpapfit_version": __version__, "identity": ph.identity, "pose": ph.pose,
-        "sensor": asdict(ph.sensor),
-    })
+    subject = {"seed": ph.seed, "cpapfit_version": __version__, "identity": ph.identity, "pose": ph.pose, "sensor": asdict(ph.sensor)}
+    files.update(truth_files(ph.surface, ph.faces, "camera (x right, y down, z forward)", subject,
+                             project(ph.landmarks, ph.intrinsics)))
+    return files
+
+
+def head_mesh_files(head: HeadMesh) -> dict[str, bytes]:
+    """{relative name: bytes} of a head mesh scan (head.ply: mm, vertex colours) and its truth
+    (`truth_files`, the mesh's frame; subject.json holds seed and identity)."""
+    subject = {"seed": head.seed, "cpapfit_version": __version__, "identity": head.identity}
+    files = {HEAD: trimesh.exchange.ply.export_ply(head.mesh, encoding="binary")}
+    files.update(truth_files(head.truth, load_template().faces, "template (x to the subject's left, y up, z out of the face)", subject))
     return files
 
 
 def write_phantom(ph: Phantom, folder: Path) -> list[Path]:
     """Write a phantom's capture folder and ground truth (atomically, file by file)."""
     return write_files(Path(folder), phantom_files(ph))
+
+
+def write_head_mesh(head: HeadMesh, folder: Path) -> list[Path]:
+    """Write a head mesh scan and its ground truth into a folder (atomically, file by file)."""
+    return write_files(Path(folder), head_mesh_files(head))
