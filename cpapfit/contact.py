@@ -13,8 +13,11 @@ the seal follows the face and not the sensor's noise or depth steps (a local mov
 projection). On such a scan each point's offset from the template then becomes the median over
 OUTLIER_SAMPLES scanned neighbours along the seal, so that one stray fit (a flying pixel, a depth
 step) cannot kink the seal. On a sparse mesh, too coarse to fit, the seal lands on the mesh
-itself. Where the scan has no data the seal keeps the registered template's guess, but not with a
-step at the data's edge: the offset the last scanned points took (scan minus template, along the
+itself. A head modelled with its nostrils' insides has a second layer of skin a few mm behind the
+ala: only triangles and points facing the way the skin does count, and a skin fit that would leave a
+point over LAYER_MM farther from the scan's nearest point than it began (through both layers: a seal
+2-8 mm inside the nose) gives way to the crossing itself. Where the scan has no data the seal keeps
+the registered template's guess, but not with a step at the data's edge: the offset the last scanned points took (scan minus template, along the
 normal) carries on into the gap and fades away over ~FADE_MM of seal; across a short hole it runs
 from one edge's offset to the other's.
 """
@@ -39,6 +42,7 @@ FADE_MM = 10.0  # arc length over which the scan's offset fades into a gap in th
 SKIN_MIN_POINTS = 12  # fewer scan points than this around a seal point (a sparse mesh): keep its closest point
 SKIN_NEIGHBOURS = 60  # the skin fit reaches out to this many scan points (a coarse, noisy capture: wider)
 OUTLIER_SAMPLES = 5  # the seal's offsets onto the scan: a running median over this many scanned points
+LAYER_MM = 1.0  # a skin fit leaving a point this much farther from the scan's nearest point has reached another layer
 
 
 @dataclass(frozen=True)
@@ -107,15 +111,23 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
     (`scan_surface`), and (K,) which moved: those with scan data within PROJECT_MM along the normal."""
     if isinstance(surface, trimesh.PointCloud):
         hit, near = _closest_along(points, normals, surface.kdtree)
-        sample = surface.vertices
+        sample, facing = surface.vertices, None
+        nearest = surface.vertices[surface.kdtree.query(points)[1]]
     else:
-        hit, near = _hit_along(points, normals, surface)
-        sample = surface.vertices[np.unique(surface.faces)]
-    skin, fitted = local_skin(hit, normals, np.asarray(sample))
+        nearest, _, tri = trimesh.proximity.closest_point(surface, points)
+        winding = np.sign(np.einsum("ij,ij->i", np.asarray(surface.face_normals)[tri], normals).sum()) or 1.0
+        hit, near = _hit_along(points, normals, surface, winding)
+        used = np.unique(surface.faces)
+        sample, facing = surface.vertices[used], winding * np.asarray(surface.vertex_normals)[used]
+    skin, fitted = local_skin(hit, normals, np.asarray(sample), facing)
     offset = np.einsum("ij,ij->i", skin - points, normals)
     if near.any() and fitted[near].mean() >= 0.5:  # a scan dense enough to fit (noisy), not a sparse mesh's exact hits
         offset[near] = median_filter(offset[near], size=min(OUTLIER_SAMPLES, int(near.sum())), mode="wrap")
-    return np.where(near[:, None], points + offset[:, None] * normals, points), near
+    start = np.linalg.norm(points - nearest, axis=1) + LAYER_MM
+    moved = points + offset[:, None] * normals
+    astray = np.linalg.norm(moved - nearest, axis=1) > start  # the skin fit reached another layer: the crossing itself
+    moved[astray] = hit[astray]
+    return np.where(near[:, None], moved, points), near
 
 
 def faded_offsets(loop: np.ndarray, offset: np.ndarray, known: np.ndarray) -> np.ndarray:
@@ -137,13 +149,16 @@ def faded_offsets(loop: np.ndarray, offset: np.ndarray, known: np.ndarray) -> np
     return np.where(known, offset, out)
 
 
-def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh, winding: float) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) the mesh's crossing of each point's normal line nearest the point, and (K,) whether
-    there is one within PROJECT_MM (where not, the point itself)."""
+    there is one within PROJECT_MM (where not, the point itself). Only triangles facing the way the
+    skin does count (their normals times `winding`, +-1: the mesh's, out of the face): the inside of
+    a modelled nostril lies a few mm behind the ala, and a seal pulled onto it dived 4 mm into the nose."""
     origins = points - PROJECT_MM * normals
-    where, ray, _ = mesh.ray.intersects_location(origins, normals, multiple_hits=True)
+    where, ray, tri = mesh.ray.intersects_location(origins, normals, multiple_hits=True)
     miss = np.abs(np.einsum("ij,ij->i", where - origins[ray], normals[ray]) - PROJECT_MM)
-    keep = miss <= PROJECT_MM
+    facing = winding * np.einsum("ij,ij->i", np.asarray(mesh.face_normals)[tri], normals[ray]) > 0.0
+    keep = (miss <= PROJECT_MM) & facing
     order = np.lexsort((miss[keep], ray[keep]))
     ray, where = ray[keep][order], where[keep][order]
     first = np.unique(ray, return_index=True)[1]
@@ -169,22 +184,25 @@ def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: cKDTree) -> t
     return hit, near
 
 
-def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) points moved along their (K, 3) unit normals onto a quadric height field fitted to the
     (S, 3) scan points around each: its SKIN_NEIGHBOURS nearest, Gaussian weights of width
-    SKIN_WIDTH_MM or half the farthest one's distance if more; and (K,) which were fitted. A point
-    with fewer than SKIN_MIN_POINTS scan points within 2 SKIN_WIDTH_MM across the skin (a sparse
-    mesh) stays. mm."""
+    SKIN_WIDTH_MM or half the farthest one's distance if more; and (K,) which were fitted. Given the
+    sample's (S, 3) unit normals `facing` (out of the face), only the points facing the side each
+    point's normal does take part: a modelled nostril's inside lies a few mm behind the ala, and a fit
+    through both layers put a seal 3.6 mm off the skin. A point with fewer than SKIN_MIN_POINTS such
+    scan points within 2 SKIN_WIDTH_MM across the skin (a sparse mesh) stays. mm."""
     out = points.copy()
     nearest = cKDTree(sample).query(points, k=min(SKIN_NEIGHBOURS, len(sample)))[1].reshape(len(points), -1)
     offsets = sample[nearest] - points[:, None]  # (K, SKIN_NEIGHBOURS, 3)
     height = np.einsum("knc,kc->kn", offsets, normals)
     distance_sq = np.sum(offsets**2, axis=2)
     across = np.sqrt(np.maximum(distance_sq - height**2, 0.0))
-    fitted = np.sum(across <= 2.0 * SKIN_WIDTH_MM, axis=1) >= SKIN_MIN_POINTS
+    same = np.ones(nearest.shape, dtype=bool) if facing is None else np.einsum("knc,kc->kn", facing[nearest], normals) > 0.0
+    fitted = np.sum(same & (across <= 2.0 * SKIN_WIDTH_MM), axis=1) >= SKIN_MIN_POINTS
     widths = np.maximum(SKIN_WIDTH_MM, np.sqrt(distance_sq.max(axis=1)) / 2.0)
     for k in np.flatnonzero(fitted):
-        out[k] += _height(offsets[k], normals[k], widths[k]) * normals[k]
+        out[k] += _height(offsets[k][same[k]], normals[k], widths[k]) * normals[k]
     return out, fitted
 
 

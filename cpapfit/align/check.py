@@ -7,10 +7,11 @@ Measures of the template's central face, carried by the similarity onto the scan
   tip, not one noise spike) above the scan 18 mm to either side of it and
   20 mm below it (farther out, to 40 mm, where a hole leaves no data there), along the face's forward
   direction (a face: 10-30 mm and 10-25 mm; a sphere, a wall: a few mm; the edge of a box: a
-  ridge, but nothing below); each height is the upper quartile of the scan points within
-  PROBE_MM across: the skin's top layer, not the noise's highest point (1.4 mm of depth noise
-  took 5 mm off a face's nose) nor the middle of a slope (the median let a template misplaced on
-  a shaded render pass);
+  ridge, but nothing below); each height is where a camera in front of the face first meets the
+  scan: the median first hit of a bundle of rays cast back along the forward direction within
+  PROBE_MM across (a point cloud through a surface over its points facing that way). A column of
+  points would also hold what lies behind the skin (a modelled head's nostril and lip insides
+  read a nose tip as standing -4 to +3 mm above its sides), and one ray the noise's highest point;
 - scale: the similarity's, template to scan. Adult faces differ from the template (an average
   adult's) by ~10 % in size; a face "found" at half or twice its size is another shape mistaken
   for one (a render's shading, a face seen at the wrong distance), or a scan in other units;
@@ -22,9 +23,11 @@ Measures of the template's central face, carried by the similarity onto the scan
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
+from ..landmarks.cloud import facing_surface
 from ..scan import HEAD_MM, Scan
 from ..template import Template
 from .similarity import Similarity
@@ -35,8 +38,8 @@ RIDGE_OFFSETS_MM = (18.0, 22.0, 26.0)  # probed in turn on each side: the first 
 BELOW_OFFSETS_MM = (20.0, 25.0, 30.0, 35.0, 40.0)  # probed in turn: the first with scan data counts (down to the lower lip)
 PEAK_SEARCH_MM = 15.0
 PEAK_LAYER_MM = 2.0  # the nose tip: the middle of the scan's top layer this thick
-PROBE_MM = 4.0
-TOP_LAYER_PERCENTILE = 75.0
+PROBE_MM = 4.0  # across each probe's bundle of rays
+REACH_MM = 200.0  # the probing rays start this far in front of the face
 
 # Thresholds: a face passes all of them.
 MIN_COVERAGE = 0.5
@@ -124,26 +127,54 @@ def nose_peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) 
 def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity) -> tuple[float, float]:
     """How far the scan's nose tip (the peak near the aligned template's) stands out (mm, along the face's forward direction)
     above the scan to either side (those sides with data) and below it, each at the first of its
-    offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data (NaN: none has any)."""
+    offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data (NaN: none has any), each height the
+    first surface a camera in front of the face sees there (`first_surface`)."""
     lm = template.vertices
     forward, up = similarity.rotation[:, 2], similarity.rotation[:, 1]
     side = similarity.rotation @ (lm[LEFT_ALA] - lm[RIGHT_ALA])
     side /= np.linalg.norm(side)
-    tip = similarity.apply(lm[NOSE_TIP][None])[0]
+    tip = nose_peak(tree, scan, similarity.apply(lm[NOSE_TIP][None])[0], forward)
+    beside = np.array([tip + s * offset * side for s in (-1.0, 1.0) for offset in RIDGE_OFFSETS_MM])
+    below = tip - np.outer(BELOW_OFFSETS_MM, up)
+    heights = first_surface(_facing(scan, forward), np.vstack([tip, beside, below]), forward)
+    sides = heights[1:1 + len(beside)].reshape(2, -1)
+    sides = np.array([_first(row) for row in sides])
+    rise = heights[0] - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
+    return float(rise), float(heights[0] - _first(heights[1 + len(beside):]))
 
-    def height(at: np.ndarray) -> float:
-        near = tree.query_ball_point(at, r=PROBE_MM + 30.0)
-        lateral = scan.vertices[near] - at
-        lateral -= np.outer(lateral @ forward, forward)
-        pts = scan.vertices[near][np.linalg.norm(lateral, axis=1) < PROBE_MM]
-        return float(np.percentile(pts @ forward, TOP_LAYER_PERCENTILE)) if len(pts) else np.nan
 
-    tip = nose_peak(tree, scan, tip, forward)
-    top = height(tip)
-    sides = np.array([_first(height(tip + s * offset * side) for offset in RIDGE_OFFSETS_MM) for s in (-1.0, 1.0)])
-    beside = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
-    below = top - _first(height(tip - offset * up) for offset in BELOW_OFFSETS_MM)
-    return float(beside), float(below)
+def _facing(scan: Scan, forward: np.ndarray) -> trimesh.Trimesh:
+    """The scan's surface as a camera looking back along unit `forward` sees it: its triangles, or a
+    point cloud's surface over its points facing that way (`facing_surface`)."""
+    seen = facing_surface(scan, forward) if scan.is_point_cloud else scan
+    return trimesh.Trimesh(seen.vertices, seen.faces, process=False)
+
+
+def first_surface(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """(K,) mm: the height along unit `forward` of the surface a camera in front sees at each of (K, 3)
+    `at` points: the median first hit of 19 rays cast back along -forward within PROBE_MM
+    across (from REACH_MM in front), NaN where fewer than half of them meet the surface."""
+    if not len(surface.faces):
+        return np.full(len(at), np.nan)
+    helper = np.eye(3)[np.argmin(np.abs(forward))]
+    u = np.cross(forward, helper)
+    u /= np.linalg.norm(u)
+    disc = _disc() @ np.stack([u, np.cross(forward, u)])
+    origins = (at[:, None, :] + disc[None] + REACH_MM * forward).reshape(-1, 3)
+    hits, ray, _ = surface.ray.intersects_location(origins, np.tile(-forward, (len(origins), 1)), multiple_hits=False)
+    height = np.full(len(origins), np.nan)
+    height[ray] = hits @ forward
+    height = height.reshape(len(at), -1)
+    enough = np.isfinite(height).sum(axis=1) >= 0.5 * height.shape[1]
+    out = np.full(len(at), np.nan)
+    out[enough] = np.nanmedian(height[enough], axis=1)
+    return out
+
+
+def _disc() -> np.ndarray:
+    """(19, 2) mm offsets across the probe: its centre and rings of 6 and 12 out to PROBE_MM / 2."""
+    rings = [(r, k) for r, n in ((0.25 * PROBE_MM, 6), (0.5 * PROBE_MM, 12)) for k in np.arange(n) * 2 * np.pi / n]
+    return np.array([[0.0, 0.0]] + [[r * np.cos(k), r * np.sin(k)] for r, k in rings])
 
 
 def _first(heights) -> float:
