@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from cpapfit.errors import InputError
 from cpapfit.ict import EXPRESSIONS, MULTIPIE_TO_FACEMESH, ict_face, load_ict, template_truth
+from cpapfit.ict.phantom import jaw_open_weight, random_subject
 from cpapfit.template import load_template
 
 FLOAT16_MM = 0.02  # the largest rounding error of a float16 mode (the model's modes are under 40 mm)
@@ -25,6 +27,43 @@ def test_the_shipped_model_is_the_shared_one_turned_into_the_template_frame(shar
     assert np.abs(model.expressions - full["expression_mm"][[names.index(n) for n in EXPRESSIONS]] @ r.T).max() < FLOAT16_MM
     assert np.array_equal(model.triangles, full["triangles"]) and np.array_equal(model.landmarks, full["landmarks_multipie68"])
     assert np.allclose(r @ r.T, np.eye(3)) and np.isclose(np.linalg.det(r), 1.0)  # rigid: no scale, no mirror
+
+
+@pytest.mark.shared
+def test_the_full_model_is_the_shipped_one_with_all_its_modes(shared_data):
+    """load_ict(path): the original file in full, in the shipped model's frame; its subjects lie off
+    the span of the shipped 40 modes (5 seeds, face area, least-squares projection on those modes:
+    mean 0.58-0.90 mm, max 2.3-3.8 mm)."""
+    path = shared_data / "ict_face_model" / "ict_face_model.npz"
+    full, shipped = load_ict(path), load_ict()
+    assert load_ict(str(path)) is full and load_ict() is shipped  # read once per path
+    k, f = len(shipped.identity), shipped.face_vertices
+    assert len(full.identity) == 100 and full.identity.dtype == np.float64 and full.identity_share == 1.0
+    assert np.abs(full.neutral - shipped.neutral).max() < 0.05  # mm
+    assert np.abs(full.identity[:k] - shipped.identity).max() < FLOAT16_MM
+    assert full.expression_names == shipped.expression_names and np.abs(full.expressions - shipped.expressions).max() < FLOAT16_MM
+    assert np.array_equal(full.triangles, shipped.triangles) and np.array_equal(full.landmarks, shipped.landmarks)
+    assert abs(jaw_open_weight(12.0, full) - jaw_open_weight(12.0)) < 1e-3
+    span = shipped.identity[:, :f].reshape(k, -1).T
+    means = []
+    for seed in range(5):
+        face, identity = random_subject(np.random.default_rng(seed), 0.0, full)
+        assert identity["ict_modes"] == 100
+        np.testing.assert_array_equal(identity["ict_weights"][:k], random_subject(np.random.default_rng(seed), 0.0)[1]["ict_weights"])
+        offset = face[:f] - shipped.neutral[:f]
+        weights = np.linalg.lstsq(span, offset.ravel(), rcond=None)[0]
+        gap = np.linalg.norm(offset - (span @ weights).reshape(f, 3), axis=1)
+        assert gap.mean() > 0.4 and gap.max() > 1.5  # mm
+        means.append(gap.mean())
+    assert np.mean(means) > 0.6
+
+
+def test_load_ict_refuses_a_file_that_is_not_the_model(tmp_path):
+    np.savez(tmp_path / "other.npz", neutral_mm=np.zeros((3, 3)))
+    with pytest.raises(InputError, match="no identity_mm"):
+        load_ict(tmp_path / "other.npz")
+    with pytest.raises(InputError, match="cannot read"):
+        load_ict(tmp_path / "absent.npz")
 
 
 def test_a_face_is_the_neutral_plus_its_weighted_modes():

@@ -8,15 +8,24 @@ the 100 identity modes, 97.0 % of the identity variance over the face area, and 
 expressions, both as float16 (largest rounding error 0.016 mm); `tools/build_ict_data.py` makes
 the file. Frame: the template's (x to the subject's left, y up, z out of the face; mm): the model
 turned and moved rigidly, no scale, so that its landmarks lie best on the template's.
+
+`load_ict()` is the shipped model; `load_ict(path)` reads the original model file
+(`ict_face_model.npz`, as in ../shared/data/ict_face_model/) in full: all 100 identity modes and
+the same expressions, float64, turned into the same frame with the shipped rotation and
+translation. Subjects drawn from it lie outside the span of the shipped 40 modes, a fair test of
+anything that uses those modes as a shape prior.
 """
 
 import io
+import zipfile
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..frozen import freeze_arrays
 
 EXPRESSIONS = (
@@ -75,9 +84,23 @@ def _data(name: str):
     return np.load(io.BytesIO(resources.files(__package__).joinpath("data", name).read_bytes()))
 
 
+FULL_MODEL_KEYS = (
+    "neutral_mm", "identity_mm", "expression_mm", "expression_names", "triangles", "landmarks_multipie68",
+    "face_area_vertices", "head_vertices",
+)
+"""The arrays `load_ict(path)` reads from the original model file."""
+
+
+def load_ict(source: Path | None = None) -> IctModel:
+    """The model, template frame: the shipped one (`data/ict_face.npz`) when `source` is None, else
+    the original model file at `source` in full (every identity mode, the EXPRESSIONS, float64;
+    `identity_share` 1), turned into the template frame with the shipped model's rotation and
+    translation. Read once per process and path; InputError if `source` is not that file."""
+    return _shipped() if source is None else _full(Path(source).resolve())
+
+
 @lru_cache(maxsize=1)
-def load_ict() -> IctModel:
-    """The shipped model (`data/ict_face.npz`)."""
+def _shipped() -> IctModel:
     with _data("ict_face.npz") as data:
         return IctModel(
             neutral=data["neutral_mm"].astype(np.float64), identity=data["identity_mm"].astype(np.float64),
@@ -86,6 +109,35 @@ def load_ict() -> IctModel:
             face_vertices=int(data["face_area_vertices"]), head_vertices=int(data["head_vertices"]),
             identity_share=float(data["identity_share"]),
         )
+
+
+@lru_cache(maxsize=4)
+def _full(source: Path) -> IctModel:
+    """The original model file at `source` (mm, its own frame) as an IctModel, x -> R x + t with
+    the shipped model's R and t."""
+    try:
+        with np.load(source) as data:
+            missing = [key for key in FULL_MODEL_KEYS if key not in data.files]
+            if missing:
+                raise InputError(f"{source}: not the ICT face model file (no {', '.join(missing)} in it)")
+            src = {key: data[key] for key in FULL_MODEL_KEYS}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{source}: cannot read the ICT face model file ({type(exc).__name__}: {exc})".splitlines()[0]) from None
+    names = [str(n) for n in src["expression_names"]]
+    absent = [name for name in EXPRESSIONS if name not in names]
+    shipped = _shipped()
+    if absent or src["neutral_mm"].shape != shipped.neutral.shape or src["identity_mm"].shape[1:] != shipped.neutral.shape:
+        raise InputError(f"{source}: not the ICT face model file ({', '.join(absent) or 'its vertex count'} differs from the shipped model's)")
+    with _data("ict_face.npz") as data:
+        rotation, translation = data["rotation"], data["translation_mm"]
+    return IctModel(
+        neutral=src["neutral_mm"].astype(np.float64) @ rotation.T + translation,
+        identity=src["identity_mm"].astype(np.float64) @ rotation.T,
+        expressions=src["expression_mm"][[names.index(n) for n in EXPRESSIONS]].astype(np.float64) @ rotation.T,
+        expression_names=EXPRESSIONS, triangles=src["triangles"].astype(np.int64),
+        landmarks=src["landmarks_multipie68"].astype(np.int64), face_vertices=int(src["face_area_vertices"]),
+        head_vertices=int(src["head_vertices"]), identity_share=1.0,
+    )
 
 
 def ict_face(model: IctModel, identity_weights: np.ndarray, expression: dict[str, float]) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Synthetic subjects drawn from the ICT face model: faces that are not the template deformed.
 
-`make_ict_phantom(seed)` draws an identity (weights ~ N(0, 1) on the shipped modes), opens the jaw
-if asked, poses the whole head (face with its modelled nostril and lip insides, head, neck and
+`make_ict_phantom(seed)` draws an identity (weights ~ N(0, 1) on every identity mode of the model:
+the shipped 40 by default, or those of `model=load_ict(path)`, the full model), opens the jaw if asked, poses the whole head (face with its modelled nostril and lip insides, head, neck and
 eyeballs; an open mouth's back closed CAVITY_MM behind the lips) in front of the virtual depth
 camera of `cpapfit.phantom` and renders its colour and depth images with the same sensor model.
 The truth is `template_truth` of the posed face: every template vertex where it lies on this face,
@@ -25,7 +25,7 @@ from ..phantom import (
 )
 from ..render import raycast
 from ..template import load_template
-from . import ict_face, load_ict, template_truth
+from . import IctModel, ict_face, load_ict, template_truth
 
 LOWER_INNER_LIP = 14  # the template landmark whose move `mouth_open_mm` is
 VIEW_TILTS_DEG = (0.0, 30.0, 60.0)  # a frontal scanner's views: straight on, and 8 round at each other tilt
@@ -55,19 +55,20 @@ class HeadMesh:
         freeze_arrays(self)
 
 
-def jaw_open_weight(mouth_open_mm: float) -> float:
+def jaw_open_weight(mouth_open_mm: float, model: IctModel | None = None) -> float:
     """The jawOpen weight that moves the lower inner lip's truth point `mouth_open_mm` (the model's
-    expressions add to any identity, so this is every face's)."""
-    model = load_ict()
+    expressions add to any identity, so this is every face's; `model`: the shipped one if None)."""
+    model = load_ict() if model is None else model
     move = template_truth(model.expressions[model.expression_names.index("jawOpen")])[LOWER_INNER_LIP]
     return float(mouth_open_mm / np.linalg.norm(move))
 
 
-def random_subject(rng: np.random.Generator, mouth_open_mm: float) -> tuple[np.ndarray, dict]:
-    """((V, 3) mm ICT vertices, template frame; identity record) of a random face, jaw open as asked."""
-    model = load_ict()
+def random_subject(rng: np.random.Generator, mouth_open_mm: float, model: IctModel | None = None) -> tuple[np.ndarray, dict]:
+    """((V, 3) mm ICT vertices, template frame; identity record) of a random face of `model` (the
+    shipped one if None; weights ~ N(0, 1) on all its identity modes), jaw open as asked."""
+    model = load_ict() if model is None else model
     weights = rng.normal(size=len(model.identity))
-    expression = {"jawOpen": jaw_open_weight(mouth_open_mm)} if mouth_open_mm > 0 else {}
+    expression = {"jawOpen": jaw_open_weight(mouth_open_mm, model)} if mouth_open_mm > 0 else {}
     identity = {"population": "ict", "ict_modes": len(model.identity), "ict_weights": weights.tolist(), "expression": expression}
     if mouth_open_mm > 0:
         identity["mouth_open_mm"] = float(mouth_open_mm)
@@ -180,15 +181,17 @@ def ict_albedo(skin: np.ndarray) -> np.ndarray:
 
 def make_ict_phantom(
     seed: int, sensor: SensorModel = SensorModel(), yaw_deg: float | None = None, distance_mm: float | None = None,
-    pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0,
+    pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0, model: IctModel | None = None,
 ) -> Phantom:
-    """The ICT subject of `seed` as an RGB-D capture with its truth: same seed, same arrays, bit for
-    bit. `yaw_deg`, `distance_mm` and `pose` as for `cpapfit.phantom.make_phantom` (the same face
-    whatever the pose); `mouth_open_mm` > 0 opens the jaw (the model's jawOpen) so that the lower
-    inner lip moves that far (`jaw_open_weight`)."""
+    """The ICT subject of `seed` as an RGB-D capture with its truth: same seed and model, same
+    arrays, bit for bit. `yaw_deg`, `distance_mm` and `pose` as for `cpapfit.phantom.make_phantom`
+    (the same face whatever the pose); `mouth_open_mm` > 0 opens the jaw (the model's jawOpen) so
+    that the lower inner lip moves that far (`jaw_open_weight`). `model`: the face model drawn from
+    (`load_ict()` or `load_ict(path)`; the shipped one if None). The identity's first 40 weights
+    are the same whatever the model, the rest of the draws (camera, pose, light) follow its mode count."""
     rng = np.random.default_rng(seed)
     template = load_template()
-    face, identity = random_subject(rng, mouth_open_mm)
+    face, identity = random_subject(rng, mouth_open_mm, model)
     truth = template_truth(face)
     intrinsics = random_intrinsics(rng)
     surface, placed = place_in_view(truth, template, intrinsics, rng, yaw_deg, distance_mm, pose)
@@ -201,13 +204,13 @@ def make_ict_phantom(
     return Phantom(seed, image, depth_raw, intrinsics, sensor, surface, template.faces, identity, placed)
 
 
-def ict_head_mesh(seed: int, insides: bool = True, mouth_open_mm: float = 0.0) -> HeadMesh:
-    """The ICT subject of `seed` (the face of `make_ict_phantom(seed, mouth_open_mm=...)`) as a mesh
-    scan, mm, template frame, vertex colours: the whole modelled head with the insides of its
-    nostrils and lips (`insides`), or only the triangles a frontal scanner sees (`seen_triangles`:
-    no insides, no back of the head). Same seed, same mesh."""
+def ict_head_mesh(seed: int, insides: bool = True, mouth_open_mm: float = 0.0, model: IctModel | None = None) -> HeadMesh:
+    """The ICT subject of `seed` (the face of `make_ict_phantom(seed, mouth_open_mm=..., model=...)`)
+    as a mesh scan, mm, template frame, vertex colours: the whole modelled head with the insides of
+    its nostrils and lips (`insides`), or only the triangles a frontal scanner sees (`seen_triangles`:
+    no insides, no back of the head). Same seed and model, same mesh."""
     rng = np.random.default_rng(seed)
-    face, identity = random_subject(rng, mouth_open_mm)
+    face, identity = random_subject(rng, mouth_open_mm, model)
     vertices, triangles = scene(face)
     colours = np.round(255.0 * ict_albedo(skin_tone(rng))).astype(np.uint8)
     if not insides:
