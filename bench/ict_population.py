@@ -1,0 +1,148 @@
+"""Designs on faces the template was not made from: ICT Face Model subjects (`cpapfit.ict`), end to
+end (`pipeline.design`), both masks, as an RGB-D capture an operator framed (`make_ict_phantom`,
+`phantom.FRAMED`) and as a head mesh scan with its modelled nostril and lip insides
+(`ict_head_mesh`), turned and moved at random (a mesh may come in any orientation). The faces are
+drawn from the full ICT model (`load_ict(path)`: all 100 identity modes, `--model`, by default
+../shared/data/ict_face_model/ict_face_model.npz when present, else the shipped 40 modes), so
+they lie outside the span of the shipped 40 modes a registration may use as its shape prior.
+
+Per design: made or refused (and why), flagged ("rescan advised", with the gates), how the template
+was placed (landmarks by image, render, or the shape alone), and against the truth (the template
+mapped onto the ICT face, `template_truth`):
+- band: the registered template's contact band of that mask, mean and 95th percentile of the
+  distances of its vertices from their true positions (mm);
+- curve: the seal curve carried by the registration (the same barycentric points), mean (mm);
+- landmarks: the registered template's Face Mesh landmarks against the model's own Multi-PIE
+  landmarks of the same definition, 9 points without the nose tip (mm); the same measure of the
+  truth itself (the correspondence's own definitional offset) is printed beside it.
+Silently wrong: made, not flagged, band mean over 2 mm; misplaced: band mean over 5 mm (made at all).
+
+Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh]
+       [--model NPZ | --model shipped]
+"""
+
+import argparse
+import json
+import platform
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from cpapfit import __version__
+from cpapfit.contact import template_curve
+from cpapfit.errors import CpapfitError
+from cpapfit.ict import MULTIPIE_TO_FACEMESH, load_ict
+from cpapfit.ict.phantom import ict_head_mesh, make_ict_phantom, random_subject
+from cpapfit.io import load_scan
+from cpapfit.io.capture import capture_files
+from cpapfit.io.write import write_files
+from cpapfit.phantom import FRAMED, to_camera
+from cpapfit.pipeline import design
+from cpapfit.template import MASKS, load_template
+
+POINTS = (31, 33, 35, 36, 39, 42, 45, 48, 54)  # Multi-PIE: nose base, eye corners, mouth corners (no nose tip)
+FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
+
+
+def subject(seed: int, kind: str, source: Path | None = None):
+    """(scan, truth (N, 3) template order, ICT landmarks (9, 3)), all mm in the scan's frame; the
+    face drawn from the ICT model file `source` (`load_ict(source)`: the shipped model if None)."""
+    model = load_ict(source)
+    face = random_subject(np.random.default_rng(seed), 0.0, model)[0]
+    marks = face[model.landmarks[list(POINTS)]]
+    with tempfile.TemporaryDirectory() as tmp:
+        if kind == "capture":
+            ph = make_ict_phantom(seed, pose=FRAMED, model=model)
+            write_files(Path(tmp), capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+            return load_scan(Path(tmp)), ph.surface, to_camera(marks, ph.pose)
+        head = ict_head_mesh(seed, model=model)
+        rng = np.random.default_rng(seed + 7919)
+        turn = Rotation.random(random_state=rng).as_matrix()
+        shift = rng.uniform(-300.0, 300.0, 3)
+        mesh = head.mesh.copy()
+        mesh.apply_transform(np.block([[turn, shift[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]))
+        path = Path(tmp) / "head.ply"
+        path.write_bytes(mesh.export(file_type="ply"))
+        return load_scan(path), head.truth @ turn.T + shift, marks @ turn.T + shift
+
+
+def run(job: tuple[int, str, str, Path | None]) -> dict:
+    """One design of subject `seed` (drawn from the model file `source`, None: the shipped model) as
+    a `kind` scan with a `mask`, measured against its truth."""
+    seed, kind, mask, source = job
+    scan, truth, marks = subject(seed, kind, source)
+    row = {"seed": seed, "kind": kind, "mask": mask}
+    template = load_template()
+    index = [MULTIPIE_TO_FACEMESH[p] for p in POINTS]
+    row["truth_landmarks_mm"] = float(np.linalg.norm(truth[index] - marks, axis=1).mean())
+    try:
+        d = design(scan, mask)
+    except CpapfitError as exc:
+        return {**row, "outcome": "refused", "reason": str(exc)[:200]}
+    v, fit = d.registration.vertices, d.fits["custom"].summary()
+    band = np.linalg.norm(v[template.regions[mask].band] - truth[template.regions[mask].band], axis=1)
+    tri, bary = template_curve(mask)
+    curve = [np.einsum("kj,kjc->kc", bary, x[template.faces[tri]]) for x in (v, truth)]
+    return {
+        **row, "outcome": "made", "flags": [g.code for g in d.quality.flags], "path": d.alignment.landmarks.path,
+        "band_mm": float(band.mean()), "band_p95_mm": float(np.percentile(band, 95)),
+        "curve_mm": float(np.linalg.norm(curve[0] - curve[1], axis=1).mean()),
+        "landmarks_mm": float(np.linalg.norm(v[index] - marks, axis=1).mean()),
+        "leak_l_min": fit["leak_l_min"], "peak_kpa": fit["pressure_max_kpa"], "window": fit["window_fraction"],
+    }
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown: one line per (kind, mask) and one for all."""
+    out = ["| scans | mask | n | designed | flagged | refused | band mean (mm) | band p95 (mm) | curve (mm) | landmarks (mm) "
+           "| truth's landmarks (mm) | over 5 mm | silently wrong (> 2 mm) |", "|---" * 13 + "|"]
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["kind"], r["mask"]), []).append(r)
+    groups[("all", "both")] = rows
+    for (kind, mask), rs in groups.items():
+        made = [r for r in rs if r["outcome"] == "made"]
+        mean = lambda key: f"{np.mean([r[key] for r in made]):.2f}" if made else "-"  # noqa: E731
+        out.append(
+            f"| {kind} | {mask} | {len(rs)} | {100 * len(made) / len(rs):.0f} % | {sum(bool(r['flags']) for r in made)} "
+            f"| {len(rs) - len(made)} | {mean('band_mm')} | {mean('band_p95_mm')} | {mean('curve_mm')} | {mean('landmarks_mm')} "
+            f"| {np.mean([r['truth_landmarks_mm'] for r in rs]):.2f} | {sum(r['band_mm'] > 5.0 for r in made)} "
+            f"| {sum(r['band_mm'] > 2.0 and not r['flags'] for r in made)} |")
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=50)
+    ap.add_argument("--first", type=int, default=2000)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--kinds", nargs="+", default=["capture", "mesh"], choices=["capture", "mesh"])
+    ap.add_argument("--rows", type=Path, default=None, help="also write every design's row here (JSON lines)")
+    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
+                    help="the ICT model file the faces are drawn from (all its identity modes), or 'shipped' "
+                    "(the package's 40); default ../shared/data/ict_face_model/ict_face_model.npz when present")
+    args = ap.parse_args()
+    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    model = load_ict(source)
+    drawn = f"{len(model.identity)} identity modes of {source}" if source else f"the shipped {len(model.identity)} identity modes"
+    print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
+          f"{args.first}-{args.first + args.seeds - 1} ({drawn}); {' and '.join(args.kinds)}; both masks; {args.workers} workers")
+    jobs = [(seed, kind, mask, source) for seed in range(args.first, args.first + args.seeds) for kind in args.kinds for mask in MASKS]
+    rows, t0 = [], time.perf_counter()
+    with ProcessPoolExecutor(args.workers) as pool:
+        for row in pool.map(run, jobs):
+            rows.append(row)
+            print(" ", json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}), flush=True)
+    if args.rows:
+        args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    print()
+    print(table(rows))
+    print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
