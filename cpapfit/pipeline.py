@@ -9,6 +9,7 @@ from scipy.spatial import cKDTree
 
 from .align.check import FaceCheck
 from .align.initial import initial_alignment, landmark_free_alignment
+from .align.morphable import ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
@@ -78,7 +79,8 @@ def align(scan: Scan, user_landmarks: Landmarks | None = None) -> Alignment:
 def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
     """Stage nonrigid: the similarity-aligned template warped onto the scan."""
     template = load_template()
-    return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params, template.mirror)
+    basis = ict_basis(template.vertices.tobytes(), params.morphable.modes) if params.morphable else None
+    return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params, template.mirror, basis)
 
 
 def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration, np.ndarray | None]:

@@ -55,6 +55,7 @@ from ..scan import Scan
 from .affine import AffineParams, apply_affine, fit_affine, starts_from
 from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
+from .morphable import MorphableParams, ShapeBasis, fit_shape
 from .symmetry import MirrorTerm, mirror_term, plane_of_pairs, symmetry_plane
 
 
@@ -80,6 +81,7 @@ class NonrigidParams:
     detected_landmark_factor: float = 0.1
     user_trust_mm: float = 2.2
     affine: AffineParams | None = AffineParams()
+    morphable: MorphableParams | None = MorphableParams()
     coarse_gates: tuple[float, float] | None = (15.0, 60.0)
     symmetry: float = 1.0
     symmetry_near_mm: float = 8.0
@@ -105,7 +107,8 @@ class Registration:
     iteration, point-to-plane (NaN where unmatched); valid: (n,) matched in the last iteration; log: per iteration;
     landmark_factor: the share of the paper's landmark weight used; landmark_spread_mm: median distance
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
-    landmarks' weight (NaN without landmarks).
+    landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
+    start, how far the face had to bend away from the start's shape.
     """
 
     vertices: np.ndarray
@@ -114,6 +117,7 @@ class Registration:
     log: tuple = field(default_factory=tuple)
     landmark_factor: float = 1.0
     landmark_spread_mm: float = np.nan
+    bending: float = np.nan
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -135,15 +139,17 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, vf: csr_matrix | Non
 
 def register(
     aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: Landmarks | None, params: NonrigidParams = NonrigidParams(),
-    mirror: np.ndarray | None = None,
+    mirror: np.ndarray | None = None, basis: ShapeBasis | None = None,
 ) -> Registration:
     """Warp the similarity-aligned template (n, 3) mm onto the scan; a user's landmarks at the paper's
     weight if they agree with the face registered at the detected landmarks' (see above). mirror: (n,)
-    each vertex's mirror pair on the template (`Template.mirror`), for the mirror term (None: none)."""
+    each vertex's mirror pair on the template (`Template.mirror`), for the mirror term (None: none);
+    basis: the template's shape basis for the morphable start (`morphable.ict_basis`; None: none)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
-    setup = _setup(aligned, faces, scan, (lm_index, lm_target), params, mirror)  # both runs: one target, one affine start
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
-    first = _register(aligned, faces, setup, (lm_index, lm_target), factor, params)
+    setup, first = min(((s, _register(aligned, faces, s, (lm_index, lm_target), factor, params))
+                        for s in _setups(aligned, faces, scan, (lm_index, lm_target), params, mirror, basis)),
+                       key=lambda run: run[1].bending)  # each start's run; one target, the same landmarks
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
         return replace(_register(aligned, faces, setup, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
@@ -161,15 +167,23 @@ class _Setup(NamedTuple):
     mirror: MirrorTerm | None
 
 
-def _setup(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams,
-           mirror: np.ndarray | None) -> _Setup:
+def _setups(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams,
+            mirror: np.ndarray | None, basis: ShapeBasis | None) -> list[_Setup]:
+    """The elastic ICP's set-up from the affine start and, given a shape basis, from the morphable one
+    (`morphable.fit_shape`, begun at the similarity: the affine start, fitted to a face unlike the
+    template's, slid 2-3 mm along ICT subjects' skin)."""
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
-    start = _affine_start(aligned, normals, target, landmarks, params)
-    term = None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params)
-    return _Setup(vf, target, laplacian(aligned, faces), start, term)
+    lap = laplacian(aligned, faces)
+    starts = [_affine_start(aligned, normals, target, landmarks, params)]
+    if basis is not None and params.morphable is not None:
+        starts.append(fit_shape(aligned, basis, target, lambda v: vertex_normals(v, faces, vf),
+                                (params.point_to_point, params.point_to_plane), (params.max_distance_mm, params.max_normal_deg),
+                                params.morphable))
+    return [_Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
+            for start in starts]
 
 
 def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: NonrigidParams) -> MirrorTerm:
@@ -212,7 +226,7 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
     final = start + disp
     m = match(target, final, vertex_normals(final, faces, vf), params.max_distance_mm, params.max_normal_deg)
     residual = np.where(m.valid, _plane_distance(final, m, target), np.nan)
-    return Registration(final, residual, m.valid, tuple(log), factor)
+    return Registration(final, residual, m.valid, tuple(log), factor, bending=float(np.sum((lap @ disp) ** 2)))
 
 
 def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:
