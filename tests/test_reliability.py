@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from cpapfit.align.initial import DISAGREE_MM
 from cpapfit.cli import main
 from cpapfit.io import load_scan
 from cpapfit.io.design import design_files
@@ -195,15 +196,18 @@ def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
     assert quality.get("landmark_spread_mm", np.inf) > GATES.detected_spread_flag_mm  # none recorded once they are dropped
 
 
-def test_a_colour_image_far_from_its_depth_is_designed_from_the_geometry(tmp_path, phantom1):
-    """Colour 32 px (~3 cm) to the side: the face MediaPipe finds fails the face check, so the
-    template is placed by the face's shape alone (it was refused as "no face found"); the design is
-    flagged saying why, and lies within 1 mm of the truth."""
-    codes, err = design_flags(tmp_path, with_colour_shift(phantom1, 32))
-    assert codes == ["landmark_free"] and "the face found by image failed the face check" in err, err
-    registered = trimesh.load(tmp_path / "out" / "registered_template.ply", process=False).vertices
-    region = load_template().regions["nasal"].band
-    assert np.linalg.norm(registered[region] - phantom1.surface[region], axis=1).mean() < 1.0
+def test_a_colour_image_far_from_its_depth_is_refused_for_the_disagreement(tmp_path, phantom1):
+    """Colour 32 px (~3 cm) to the side: the face MediaPipe finds fails the face check, and the face's
+    shape alone places the mask region far from it. One of the two is on the wrong part of the face
+    and nothing tells which (on an ICT subject the shape put a nasal cushion on the lips), so the scan
+    is refused, saying how far apart they are, and nothing is written."""
+    ph = with_colour_shift(phantom1, 32)
+    write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out")
+    assert code == 2 and "the face found by image (which failed the face check)" in err, err
+    apart = float(err.split("place the mask region ")[1].split(" mm apart")[0])
+    assert apart > DISAGREE_MM, err
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_capture_without_colour_is_designed_from_the_shape_and_flagged(tmp_path, phantom1):

@@ -5,6 +5,8 @@ from typing import Iterator
 
 import numpy as np
 
+from ..errors import InputError
+from ..metrics import mask_region
 from ..scan import Scan, robust_extent
 from ..template import Template, central_face
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
@@ -20,6 +22,9 @@ from .similarity import Similarity, fit_similarity
 # bare STL, whose shape alone overstates its size: 0.86; a bare mesh's shaded render once gave a
 # "face" at 0.75 that passed the face check, 15 mm off).
 FRONT_SIZE = 1.25
+# A detection failing the face check and the shape's own placement this far apart (mean, mm, over both
+# masks' contact bands): one of them is on the wrong part of the face, and the design is refused.
+DISAGREE_MM = 10.0
 
 
 def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
@@ -45,11 +50,31 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
         check = check_face(scan, template, found.similarity, central)
         if check.is_face:
             break
-        failed.append(label)
+        failed.append((label, found))
     across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
     require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture, across)
-    rejected = f"the face found by {' and '.join(dict.fromkeys(failed))} failed the face check" if failed else ""
+    if found.landmarks.path == "fallback":
+        require_agreement(template, found.similarity, failed)
+    rejected = f"the face found by {' and '.join(dict.fromkeys(label for label, _ in failed))} failed the face check" if failed else ""
     return replace(found.landmarks, rejected=rejected), found.similarity, check
+
+
+def require_agreement(template: Template, shape: Similarity, failed: list[tuple[str, Detection]]) -> None:
+    """Refuse (InputError) when a detected face that failed the face check and the face's shape alone
+    (`shape`, the fallback's similarity) put the template's mask region (both masks' contact bands)
+    over DISAGREE_MM apart (mean): one of them lies on the wrong part of the face, and neither the
+    geometry nor the face check can tell which (an ICT subject's nasal cushion landed on the lips,
+    45 mm off, placed by the shape; a colour image 3 cm off its depth puts the detection off)."""
+    region = template.vertices[mask_region(template)]
+    for label, det in failed:
+        if det.landmarks.path == "fallback":
+            continue
+        apart = float(np.linalg.norm(det.similarity.apply(region) - shape.apply(region), axis=1).mean())
+        if apart > DISAGREE_MM:
+            raise InputError(
+                f"the face found by {label} (which failed the face check) and the face's shape alone place the mask region "
+                f"{apart:.0f} mm apart (at most {DISAGREE_MM:g}): one of them is on the wrong part of the face; does the colour "
+                "image line up with the depth? give landmarks with --landmarks, or rescan facing the camera")
 
 
 def landmark_free_alignment(scan: Scan, template: Template, rejected: str) -> tuple[Landmarks, Similarity, FaceCheck] | None:

@@ -1,6 +1,6 @@
 """Non-rigid registration: the paper's elastic ICP of the similarity-aligned template onto the scan.
 
-Five additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
+Six additions to the paper, all switchable: the template first gets an affine start (align/affine.py:
 the face's proportions, so that the elastic stage finds only local shape); detected landmarks
 (MediaPipe's, ~3.4 mm off: bench/RESULTS.md) pull with detected_landmark_factor = 0.1 of the paper's
 landmark weight, ~(1 mm / 3.4 mm)^2, the inverse variance of their error against a landmark placed
@@ -14,9 +14,12 @@ the face far from the template (a chin 6-10 mm off and tilted) is pulled in whil
 stiff instead of being left out. And a mirror term (align/symmetry.py): the template, mirrored across
 the scan's own plane of symmetry, lies on itself, at `symmetry` per vertex pair relaxed with the
 membrane, so that the template's midline is the face's and an unseen part of the face takes the
-shape of the side seen, while the skin is free to be asymmetric once the membrane is soft. With all
-five off (`affine=None`, `detected_landmark_factor=1`, `user_trust_mm=inf`, `coarse_gates=None`,
-`symmetry=0`) this is the paper's method.
+shape of the side seen, while the skin is free to be asymmetric once the membrane is soft. And a
+morphable start (align/morphable.py: the template's shape fitted within real faces' identity modes,
+begun at the similarity): the elastic ICP runs from it too and keeps that run if it bends clearly
+less (`MorphableParams.margin`) than the affine start's, the face then being more like the model's
+faces than the template's. With all six off (`affine=None`, `detected_landmark_factor=1`,
+`user_trust_mm=inf`, `coarse_gates=None`, `symmetry=0`, `morphable=None`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
 (2) reject pairs > 5 mm apart, with normals > 25 deg apart (coarse gates: wider while stiff), or on the scan's boundary;
@@ -147,9 +150,9 @@ def register(
     basis: the template's shape basis for the morphable start (`morphable.ict_basis`; None: none)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
-    setup, first = min(((s, _register(aligned, faces, s, (lm_index, lm_target), factor, params))
-                        for s in _setups(aligned, faces, scan, (lm_index, lm_target), params, mirror, basis)),
-                       key=lambda run: run[1].bending)  # each start's run; one target, the same landmarks
+    runs = [(s, _register(aligned, faces, s, (lm_index, lm_target), factor, params))
+            for s in _setups(aligned, faces, scan, (lm_index, lm_target), params, mirror, basis)]  # one target, the same landmarks
+    setup, first = runs[-1] if len(runs) > 1 and runs[1][1].bending < (1.0 - params.morphable.margin) * runs[0][1].bending else runs[0]
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
         return replace(_register(aligned, faces, setup, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
