@@ -1,6 +1,7 @@
 """The stages strung together. Each stage is a pure function; this module only sequences them."""
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
@@ -9,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from .align.check import FaceCheck
 from .align.initial import initial_alignment, landmark_free_alignment
-from .align.morphable import ict_basis
+from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
 from .contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
@@ -79,8 +80,15 @@ def align(scan: Scan, user_landmarks: Landmarks | None = None) -> Alignment:
 def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
     """Stage nonrigid: the similarity-aligned template warped onto the scan."""
     template = load_template()
-    basis = ict_basis(template.vertices.tobytes(), params.morphable.modes) if params.morphable else None
+    basis = template_basis(params.morphable.modes) if params.morphable else None
     return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params, template.mirror, basis)
+
+
+@lru_cache(maxsize=1)
+def template_basis(modes: int) -> ShapeBasis:
+    """The template's ICT shape basis of `modes` identity modes (`morphable.ict_basis`), made once."""
+    template = load_template()
+    return ict_basis(template.vertices, template.faces, modes)
 
 
 def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration, np.ndarray | None]:

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpapfit.align.correspondences import make_target, oriented
-from cpapfit.align.morphable import fit_shape, ict_basis
+from cpapfit.align.morphable import fit_shape
 from cpapfit.align.nonrigid import NonrigidParams, vertex_normals
 from cpapfit.align.similarity import fit_similarity
 from cpapfit.ict import ict_face, load_ict, template_truth
@@ -18,13 +18,13 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.metrics import mask_region
 from cpapfit.phantom import FRAMED, make_phantom
-from cpapfit.pipeline import align, register_template
+from cpapfit.pipeline import align, register_template, template_basis
 from cpapfit.scan import Scan
 from cpapfit.template import load_template
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)
-BASIS = ict_basis(TEMPLATE.vertices.tobytes(), 40)
+BASIS = template_basis(40)
 
 
 def _error(vertices: np.ndarray, truth: np.ndarray) -> float:
