@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .correspondences import Target, match
+from .correspondences import Target, closest_pairs, match
 
 MIN_LANDMARKS = 12  # fewer could not fix the map's 12 unknowns against their own errors
 IDENTITY = np.hstack([np.eye(3), np.zeros((3, 1))])
@@ -81,7 +81,7 @@ def _refine(points, normals, target, weights, gates, params, start) -> tuple[np.
     for _ in range(params.iterations):
         moved = local @ linear.T + shift + centre
         m = match(target, moved, _unit(normals @ np.linalg.inv(linear)), *gates)
-        keep = _closest(m, moved, target, params.trim)
+        keep = closest_pairs(m, moved, target, params.trim)
         if len(keep) < 12:
             break
         c = target.vertices[m.index[keep]] - centre
@@ -98,15 +98,6 @@ def _as_map(linear: np.ndarray, shift: np.ndarray, centre: np.ndarray) -> np.nda
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
-
-
-def _closest(m, moved: np.ndarray, target: Target, trim: float) -> np.ndarray:
-    """Indices of the valid pairs no farther apart than the `trim` quantile of their distances."""
-    i = np.flatnonzero(m.valid)
-    if len(i) == 0:
-        return i
-    dist = np.linalg.norm(target.vertices[m.index[i]] - moved[i], axis=1)
-    return i[dist <= np.quantile(dist, trim)]
 
 
 def _solve(p: np.ndarray, c: np.ndarray, n: np.ndarray, weights: tuple[float, float]):

@@ -108,3 +108,13 @@ def match(target: Target, points: np.ndarray, normals: np.ndarray, max_distance_
     cos = np.einsum("ij,ij->i", target.normals[safe], normals)
     valid = found & (dist <= max_distance_mm) & (cos >= np.cos(np.radians(max_normal_deg))) & ~target.boundary[safe]
     return Matches(index, valid)
+
+
+def closest_pairs(m: Matches, points: np.ndarray, target: Target, trim: float) -> np.ndarray:
+    """Indices of the valid pairs of (n, 3) `points` no farther apart than the `trim` quantile of their
+    distances (a trimmed ICP's pairs)."""
+    i = np.flatnonzero(m.valid)
+    if len(i) == 0:
+        return i
+    dist = np.linalg.norm(target.vertices[m.index[i]] - points[i], axis=1)
+    return i[dist <= np.quantile(dist, trim)]

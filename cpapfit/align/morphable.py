@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from ..frozen import freeze_arrays
 from ..ict import load_ict, template_on_ict
-from .correspondences import Target, match
+from .correspondences import Target, closest_pairs, match
 from .laplacian import laplacian
 
 SMOOTHING = 2.0  # mm^2-like weight of the basis's smoothing (cotangent Laplacian, no areas)
@@ -106,7 +106,7 @@ def fit_shape(
     for _ in range(params.iterations):
         current = (start + np.tensordot(coef, modes, axes=1) - centre) @ turn.T + centre + shift
         m = match(target, current[sample], normals_of(current)[sample], *gates)
-        keep = _closest(m, current[sample], target, params.trim)
+        keep = closest_pairs(m, current[sample], target, params.trim)
         if len(keep) < len(modes) + 6:
             break
         step = _solve(current[sample[keep]] - centre, modes[:, sample[keep]] @ turn.T, target.vertices[m.index[keep]] - centre,
@@ -117,15 +117,6 @@ def fit_shape(
         if np.abs(step).max() < params.converged:
             break
     return (start + np.tensordot(coef, modes, axes=1) - centre) @ turn.T + centre + shift
-
-
-def _closest(m, points: np.ndarray, target: Target, trim: float) -> np.ndarray:
-    """Indices of the valid pairs no farther apart than the `trim` quantile of their distances."""
-    i = np.flatnonzero(m.valid)
-    if len(i) == 0:
-        return i
-    dist = np.linalg.norm(target.vertices[m.index[i]] - points[i], axis=1)
-    return i[dist <= np.quantile(dist, trim)]
 
 
 def _solve(x: np.ndarray, modes: np.ndarray, q: np.ndarray, n: np.ndarray, weights: tuple[float, float],
