@@ -111,7 +111,8 @@ class Registration:
     landmark_factor: the share of the paper's landmark weight used; landmark_spread_mm: median distance
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
     landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
-    start, how far the face had to bend away from the start's shape.
+    start, how far the face had to bend away from the start's shape; start: the run kept, "affine"
+    or "morphable" (the template's shape fitted within real faces').
     """
 
     vertices: np.ndarray
@@ -121,6 +122,7 @@ class Registration:
     landmark_factor: float = 1.0
     landmark_spread_mm: float = np.nan
     bending: float = np.nan
+    start: str = "affine"
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -152,10 +154,13 @@ def register(
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     runs = [(s, _register(aligned, faces, s, (lm_index, lm_target), factor, params))
             for s in _setups(aligned, faces, scan, (lm_index, lm_target), params, mirror, basis)]  # one target, the same landmarks
-    setup, first = runs[-1] if len(runs) > 1 and runs[1][1].bending < (1.0 - params.morphable.margin) * runs[0][1].bending else runs[0]
+    if len(runs) > 1 and runs[1][1].bending < (1.0 - params.morphable.margin) * runs[0][1].bending:
+        setup, first = runs[1][0], replace(runs[1][1], start="morphable")
+    else:
+        setup, first = runs[0]
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        return replace(_register(aligned, faces, setup, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread)
+        return replace(_register(aligned, faces, setup, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread, start=first.start)
     return replace(first, landmark_spread_mm=spread)
 
 
