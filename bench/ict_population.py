@@ -17,7 +17,7 @@ mapped onto the ICT face, `template_truth`):
   truth itself (the correspondence's own definitional offset) is printed beside it.
 Silently wrong: made, not flagged, band mean over 2 mm; misplaced: band mean over 5 mm (made at all).
 
-Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh]
+Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh] [--masks nasal oronasal]
        [--model NPZ | --model shipped]
 """
 
@@ -89,6 +89,7 @@ def run(job: tuple[int, str, str, Path | None]) -> dict:
     curve = [np.einsum("kj,kjc->kc", bary, x[template.faces[tri]]) for x in (v, truth)]
     return {
         **row, "outcome": "made", "flags": [g.code for g in d.quality.flags], "path": d.alignment.landmarks.path,
+        "start": d.registration.start,
         "band_mm": float(band.mean()), "band_p95_mm": float(np.percentile(band, 95)),
         "curve_mm": float(np.linalg.norm(curve[0] - curve[1], axis=1).mean()),
         "landmarks_mm": float(np.linalg.norm(v[index] - marks, axis=1).mean()),
@@ -121,6 +122,7 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=2000)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--kinds", nargs="+", default=["capture", "mesh"], choices=["capture", "mesh"])
+    ap.add_argument("--masks", nargs="+", default=list(MASKS), choices=list(MASKS))
     ap.add_argument("--rows", type=Path, default=None, help="also write every design's row here (JSON lines)")
     ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
                     help="the ICT model file the faces are drawn from (all its identity modes), or 'shipped' "
@@ -130,8 +132,8 @@ def main() -> None:
     model = load_ict(source)
     drawn = f"{len(model.identity)} identity modes of {source}" if source else f"the shipped {len(model.identity)} identity modes"
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
-          f"{args.first}-{args.first + args.seeds - 1} ({drawn}); {' and '.join(args.kinds)}; both masks; {args.workers} workers")
-    jobs = [(seed, kind, mask, source) for seed in range(args.first, args.first + args.seeds) for kind in args.kinds for mask in MASKS]
+          f"{args.first}-{args.first + args.seeds - 1} ({drawn}); {' and '.join(args.kinds)}; {' and '.join(args.masks)}; {args.workers} workers")
+    jobs = [(seed, kind, mask, source) for seed in range(args.first, args.first + args.seeds) for kind in args.kinds for mask in args.masks]
     rows, t0 = [], time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
         for row in pool.map(run, jobs):

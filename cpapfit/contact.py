@@ -10,10 +10,11 @@ within TANGENT_MM of the normal line. "Onto the scan" means onto the skin the sc
 quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
 width SKIN_WIDTH_MM, widened to take in SKIN_NEIGHBOURS points where the scan is coarse), so that
 the seal follows the face and not the sensor's noise or depth steps (a local moving-least-squares
-projection). On such a scan each point's offset from the template then becomes the median over
-OUTLIER_SAMPLES scanned neighbours along the seal, so that one stray fit (a flying pixel, a depth
-step) cannot kink the seal. On a sparse mesh, too coarse to fit, the seal lands on the mesh
-itself. A head modelled with its nostrils' insides has a second layer of skin a few mm behind the
+projection). On a sparse mesh, too coarse to fit, the crossing itself is the skin. Each point's
+offset from the template then becomes the median over OUTLIER_SAMPLES scanned neighbours along the
+seal, so that one stray fit or crossing (a flying pixel, a depth step, a normal line through a
+nostril's opening: a seal curve turning back on itself by 167 degrees, on a head mesh with 2 mm
+facets) cannot kink the seal. A head modelled with its nostrils' insides has a second layer of skin a few mm behind the
 ala: only triangles and points facing the way the skin does count, and a skin fit that would leave a
 point over LAYER_MM farther from the scan's nearest point than it began (through both layers: a seal
 2-8 mm inside the nose) gives way to the crossing itself. Where the scan has no data the seal keeps
@@ -119,15 +120,13 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
         hit, near = _hit_along(points, normals, surface, winding)
         used = np.unique(surface.faces)
         sample, facing = surface.vertices[used], winding * np.asarray(surface.vertex_normals)[used]
-    skin, fitted = local_skin(hit, normals, np.asarray(sample), facing)
+    skin, _ = local_skin(hit, normals, np.asarray(sample), facing)
     offset = np.einsum("ij,ij->i", skin - points, normals)
-    if near.any() and fitted[near].mean() >= 0.5:  # a scan dense enough to fit (noisy), not a sparse mesh's exact hits
+    astray = np.linalg.norm(skin - nearest, axis=1) > np.linalg.norm(points - nearest, axis=1) + LAYER_MM
+    offset[astray] = np.einsum("ij,ij->i", hit - points, normals)[astray]  # the skin fit reached another layer: the crossing
+    if near.any():
         offset[near] = median_filter(offset[near], size=min(OUTLIER_SAMPLES, int(near.sum())), mode="wrap")
-    start = np.linalg.norm(points - nearest, axis=1) + LAYER_MM
-    moved = points + offset[:, None] * normals
-    astray = np.linalg.norm(moved - nearest, axis=1) > start  # the skin fit reached another layer: the crossing itself
-    moved[astray] = hit[astray]
-    return np.where(near[:, None], moved, points), near
+    return np.where(near[:, None], points + offset[:, None] * normals, points), near
 
 
 def faded_offsets(loop: np.ndarray, offset: np.ndarray, known: np.ndarray) -> np.ndarray:
