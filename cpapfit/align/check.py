@@ -128,7 +128,8 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
     """How far the scan's nose tip (the peak near the aligned template's) stands out (mm, along the face's forward direction)
     above the scan to either side (those sides with data) and below it, each at the first of its
     offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data (NaN: none has any), each height the
-    first surface a camera in front of the face sees there (`first_surface`)."""
+    first surface a camera in front of the face sees there (`first_surface`); the tip's, its top
+    layer's (`nose_peak`: rays at a hole over the tip meet nothing)."""
     lm = template.vertices
     forward, up = similarity.rotation[:, 2], similarity.rotation[:, 1]
     side = similarity.rotation @ (lm[LEFT_ALA] - lm[RIGHT_ALA])
@@ -136,11 +137,11 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
     tip = nose_peak(tree, scan, similarity.apply(lm[NOSE_TIP][None])[0], forward)
     beside = np.array([tip + s * offset * side for s in (-1.0, 1.0) for offset in RIDGE_OFFSETS_MM])
     below = tip - np.outer(BELOW_OFFSETS_MM, up)
-    heights = first_surface(_facing(scan, forward), np.vstack([tip, beside, below]), forward)
-    sides = heights[1:1 + len(beside)].reshape(2, -1)
-    sides = np.array([_first(row) for row in sides])
-    rise = heights[0] - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
-    return float(rise), float(heights[0] - _first(heights[1 + len(beside):]))
+    heights = first_surface(_facing(scan, forward), np.vstack([beside, below]), forward)
+    sides = np.array([_first(row) for row in heights[: len(beside)].reshape(2, -1)])
+    top = float(tip @ forward)
+    rise = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
+    return float(rise), float(top - _first(heights[len(beside):]))
 
 
 def _facing(scan: Scan, forward: np.ndarray) -> trimesh.Trimesh:

@@ -1,0 +1,32 @@
+"""The face check's nose probes read what a camera in front of the face sees, on any face."""
+
+import numpy as np
+
+from cpapfit.align.check import MIN_BELOW_MM, MIN_RIDGE_MM
+from cpapfit.ict.phantom import ict_head_mesh
+from cpapfit.io import load_scan
+from cpapfit.io.capture import capture_files
+from cpapfit.io.write import write_files
+from cpapfit.phantom import FRAMED, make_phantom
+from cpapfit.pipeline import align
+
+
+def test_a_head_modelled_with_its_nostril_and_lip_insides_is_a_face(tmp_path):
+    """An ICT head mesh keeps the insides of its nostrils and lips, behind the skin: a column of its
+    points read the nose tip as standing -4 to +3 mm above its sides, and every such head was refused.
+    Probed by rays from in front, its nose stands well clear of its sides and of the lip."""
+    path = tmp_path / "head.ply"
+    path.write_bytes(ict_head_mesh(1).mesh.export(file_type="ply"))
+    check = align(load_scan(path)).check
+    assert check.is_face
+    assert check.ridge_mm > MIN_RIDGE_MM + 6.0 and check.below_mm > MIN_BELOW_MM + 2.0
+
+
+def test_a_hole_over_the_nose_tip_leaves_the_nose_found(tmp_path):
+    """Subject 113's capture has a sensor hole over its nose tip: rays cast there meet nothing, so the
+    tip's height is its top layer's, and the face its colour image shows passes (it was refused)."""
+    ph = make_phantom(113, pose=FRAMED)
+    write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    al = align(load_scan(tmp_path))
+    assert al.landmarks.path == "image" and al.check.is_face
+    assert np.isfinite(al.check.ridge_mm) and np.isfinite(al.check.below_mm)
