@@ -120,7 +120,7 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
         hit, near = _hit_along(points, normals, surface, winding)
         used = np.unique(surface.faces)
         sample, facing = surface.vertices[used], winding * np.asarray(surface.vertex_normals)[used]
-    skin, _ = local_skin(hit, normals, np.asarray(sample), facing)
+    skin = local_skin(hit, normals, np.asarray(sample), facing)
     offset = np.einsum("ij,ij->i", skin - points, normals)
     astray = np.linalg.norm(skin - nearest, axis=1) > np.linalg.norm(points - nearest, axis=1) + LAYER_MM
     offset[astray] = np.einsum("ij,ij->i", hit - points, normals)[astray]  # the skin fit reached another layer: the crossing
@@ -183,10 +183,10 @@ def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: cKDTree) -> t
     return hit, near
 
 
-def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray, facing: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray, facing: np.ndarray | None = None) -> np.ndarray:
     """(K, 3) points moved along their (K, 3) unit normals onto a quadric height field fitted to the
     (S, 3) scan points around each: its SKIN_NEIGHBOURS nearest, Gaussian weights of width
-    SKIN_WIDTH_MM or half the farthest one's distance if more; and (K,) which were fitted. Given the
+    SKIN_WIDTH_MM or half the farthest one's distance if more. Given the
     sample's (S, 3) unit normals `facing` (out of the face), only the points facing the side each
     point's normal does take part: a modelled nostril's inside lies a few mm behind the ala, and a fit
     through both layers put a seal 3.6 mm off the skin. A point with fewer than SKIN_MIN_POINTS such
@@ -202,7 +202,7 @@ def local_skin(points: np.ndarray, normals: np.ndarray, sample: np.ndarray, faci
     widths = np.maximum(SKIN_WIDTH_MM, np.sqrt(distance_sq.max(axis=1)) / 2.0)
     for k in np.flatnonzero(fitted):
         out[k] += _height(offsets[k][same[k]], normals[k], widths[k]) * normals[k]
-    return out, fitted
+    return out
 
 
 def _height(offsets: np.ndarray, normal: np.ndarray, width: float) -> float:
