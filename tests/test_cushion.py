@@ -258,3 +258,30 @@ def test_the_seal_has_no_step_where_the_scan_data_ends():
     short = np.where((angle > 1.0) & (angle < 1.2), False, True)  # an 8 mm hole between offsets 1 and 2 mm
     ramp = faded_offsets(loop, np.where(angle < 1.1, 1.0, 2.0), short)
     assert np.all(np.diff(ramp[(angle > 0.9) & (angle < 1.3)]) >= 0) and np.abs(np.diff(ramp)).max() < 0.5  # not the 1 mm step
+
+
+@pytest.mark.parametrize("reach, tilt_deg", [(6, 80), (10, 88), (16, 100)])
+def test_a_seal_on_the_side_of_a_deep_nose_gives_a_cushion_that_does_not_fold(reach, tilt_deg):
+    """A seal loop (an ellipse 32 x 50 mm, 128 points) whose skin turns over a stretch of it to face
+    sideways, away from the seal's centre (80-100 degrees off the mask axis, as on the side of a
+    deep nose): the flange still goes outwards along the skin, and the cushion is a clean solid
+    of the set wall (1.5 x `reach` samples of the seal turn)."""
+    from cpapfit.contact import Contact
+    from cpapfit.cushion.nurbs import CushionParams, design_cushion
+    from cpapfit.cushion.solid import cushion_solid
+    from cpapfit.export import WALL_TOLERANCE
+
+    angle = 2 * np.pi * np.arange(128) / 128
+    curve = np.column_stack([16 * np.cos(angle), 25 * np.sin(angle), np.zeros(128)])
+    radial = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(128)])
+    gap = np.minimum(np.abs(np.arange(128) - 40), 128 - np.abs(np.arange(128) - 40))
+    tilt = np.radians(tilt_deg) * np.clip(1.5 - gap / reach, 0, 1)
+    normals = np.cos(tilt)[:, None] * [0.0, 0.0, 1.0] + np.sin(tilt)[:, None] * radial
+    contact = Contact("nasal", curve, normals, np.ones(128, bool), curve)
+    cushion = design_cushion(contact, np.array([0.0, 0, 1]), np.array([0.0, 1, 0]), np.array([0.0, 0, 15]), CushionParams())
+    rim, flange = cushion.grid()[:, 0], cushion.grid()[:, 3]
+    centre = rim.mean(axis=0)
+    outward = np.einsum("ij,ij->i", flange - rim, rim - centre)
+    assert outward.min() > 0  # every flange point lies farther out than its rim point, none folded back
+    solid, wall, folds = cushion_solid(cushion, normals)
+    assert folds == 0 and wall >= WALL_TOLERANCE * CushionParams().wall_mm

@@ -108,7 +108,7 @@ def design_cushion(
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     rim = rim - params.interference_mm * normals
     centre = rim.mean(axis=0)
-    out = _outward(rim, centre, normals)
+    out = _outward(rim, centre, normals, axis)
     ring = _frame_ring(rim, centre, axis, up, apex, contact.mask, params)
     f = params.flange_mm
     rows = [rim + f * (a * out + b * normals) for a, b in FLANGE_PROFILE]  # the seal flange, along the skin
@@ -126,13 +126,20 @@ def design_cushion(
     return Cushion(contact.mask, control, axis, up, params)
 
 
-def _outward(rim: np.ndarray, centre: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """(N, 3) unit directions in the skin's tangent plane pointing away from the seal's centre.
-    Radial rather than across the curve: the seal is star-shaped about its centre, so flanges
-    laid out radially never cross where the curve bends inwards (beside the nostrils)."""
+def _outward(rim: np.ndarray, centre: np.ndarray, normals: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N, 3) unit directions pointing away from the seal's centre, along the skin where it can.
+    Radial in the skin's tangent plane where the skin faces along the mask axis: the seal is
+    star-shaped about its centre, so flanges laid out radially never cross where the curve bends
+    inwards (beside the nostrils). Where the skin faces away from the centre instead (the side of
+    a deep nose, up to facing a little backwards) the radial direction has no part along the skin;
+    there the flange goes out across the axis in proportion, never back under the wall."""
     radial = rim - centre
-    radial -= np.einsum("ij,ij->i", radial, normals)[:, None] * normals
-    return radial / np.linalg.norm(radial, axis=1, keepdims=True)
+    along = radial - np.einsum("ij,ij->i", radial, normals)[:, None] * normals
+    share = np.linalg.norm(along, axis=1) / np.linalg.norm(radial, axis=1)  # 1: radial lies along the skin
+    across = radial - np.outer(radial @ axis, axis)
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    out = along / np.linalg.norm(radial, axis=1, keepdims=True) + (1.0 - share)[:, None] * across
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 def _frame_ring(rim, centre, axis, up, apex, mask: str, params: CushionParams) -> np.ndarray:
