@@ -4,10 +4,12 @@ Measures of the template's central face, carried by the similarity onto the scan
 - gap: distance from each template point to the scan surface (point-to-plane at the nearest scan
   point, capped at 10 mm; points with no scan point within 10 mm are uncovered);
 - nose: how far the scan rises at its nose tip (the middle of its top layer near the template's
-  tip, not one noise spike) above the scan 18 mm to either side of it and
-  20 mm below it (farther out, to 40 mm, where a hole leaves no data there), along the face's forward
-  direction (a face: 10-30 mm and 10-25 mm; a sphere, a wall: a few mm; the edge of a box: a
-  ridge, but nothing below); each height is where a camera in front of the face first meets the
+  tip, not one noise spike) above the scan 18 mm to either side of it (farther out, to 26 mm,
+  where a hole leaves no data there) and above the deepest of the scan 20-40 mm below it (the
+  mouth's line or the fold above the chin: the upper lip of some faces stands within 2-5 mm of
+  a flat nose's tip), along the face's forward direction (a face: 10-30 mm and 8-25 mm; a
+  sphere, a wall: a few mm to the sides; the edge of a box: a ridge, but nothing below); each
+  height is where a camera in front of the face first meets the
   scan: the median first hit of a bundle of rays cast back along the forward direction within
   PROBE_MM across (a point cloud through a surface over its points facing that way). A column of
   points would also hold what lies behind the skin (a modelled head's nostril and lip insides
@@ -35,7 +37,7 @@ from .similarity import Similarity
 NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
 COVER_MM = 10.0
 RIDGE_OFFSETS_MM = (18.0, 22.0, 26.0)  # probed in turn on each side: the first with scan data counts
-BELOW_OFFSETS_MM = (20.0, 25.0, 30.0, 35.0, 40.0)  # probed in turn: the first with scan data counts (down to the lower lip)
+BELOW_OFFSETS_MM = (20.0, 25.0, 30.0, 35.0, 40.0)  # probed all: the deepest with scan data counts (down to the lower lip)
 PEAK_SEARCH_MM = 15.0
 PEAK_LAYER_MM = 2.0  # the nose tip: the middle of the scan's top layer this thick
 PROBE_MM = 4.0  # across each probe's bundle of rays
@@ -126,8 +128,8 @@ def nose_peak(tree: cKDTree, scan: Scan, near: np.ndarray, forward: np.ndarray) 
 
 def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity) -> tuple[float, float]:
     """How far the scan's nose tip (the peak near the aligned template's) stands out (mm, along the face's forward direction)
-    above the scan to either side (those sides with data) and below it, each at the first of its
-    offsets (RIDGE_OFFSETS_MM, BELOW_OFFSETS_MM) with scan data (NaN: none has any), each height the
+    above the scan to either side (those sides with data), each at the first of RIDGE_OFFSETS_MM
+    with scan data, and above the deepest of the scan at BELOW_OFFSETS_MM (NaN: none has any), each height the
     first surface a camera in front of the face sees there (`first_surface`); the tip's, its top
     layer's (`nose_peak`: rays at a hole over the tip meet nothing)."""
     lm = template.vertices
@@ -141,7 +143,8 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
     sides = np.array([_first(row) for row in heights[: len(beside)].reshape(2, -1)])
     top = float(tip @ forward)
     rise = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
-    return float(rise), float(top - _first(heights[len(beside):]))
+    below_tip = heights[len(beside):]
+    return float(rise), float(top - np.nanmin(below_tip)) if np.isfinite(below_tip).any() else np.nan
 
 
 def _facing(scan: Scan, forward: np.ndarray) -> trimesh.Trimesh:
