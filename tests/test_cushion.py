@@ -279,7 +279,8 @@ def test_a_seal_on_the_side_of_a_deep_nose_gives_a_cushion_that_does_not_fold(re
     normals = np.cos(tilt)[:, None] * [0.0, 0.0, 1.0] + np.sin(tilt)[:, None] * radial
     contact = Contact("nasal", curve, normals, np.ones(128, bool), curve)
     cushion = design_cushion(contact, np.array([0.0, 0, 1]), np.array([0.0, 1, 0]), np.array([0.0, 0, 15]), CushionParams())
-    rim, flange = cushion.grid()[:, 0], cushion.grid()[:, 3]
+    grid = cushion.grid()
+    rim, flange = grid[:, 0], grid[:, 3]
     centre = rim.mean(axis=0)
     outward = np.einsum("ij,ij->i", flange - rim, rim - centre)
     assert outward.min() > 0  # every flange point lies farther out than its rim point, none folded back

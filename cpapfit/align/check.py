@@ -143,8 +143,7 @@ def _nose(tree: cKDTree, scan: Scan, template: Template, similarity: Similarity)
     sides = np.array([_first(row) for row in heights[: len(beside)].reshape(2, -1)])
     top = float(tip @ forward)
     rise = top - np.nanmean(sides) if np.isfinite(sides).any() else np.nan  # one side may be hidden
-    below_tip = heights[len(beside):]
-    return float(rise), float(top - np.nanmin(below_tip)) if np.isfinite(below_tip).any() else np.nan
+    return float(rise), float(top - _lowest(heights[len(beside):]))
 
 
 def _facing(scan: Scan, forward: np.ndarray) -> trimesh.Trimesh:
@@ -179,6 +178,11 @@ def _disc() -> np.ndarray:
     """(19, 2) mm offsets across the probe: its centre and rings of 6 and 12 out to PROBE_MM / 2."""
     rings = [(r, k) for r, n in ((0.25 * PROBE_MM, 6), (0.5 * PROBE_MM, 12)) for k in np.arange(n) * 2 * np.pi / n]
     return np.array([[0.0, 0.0]] + [[r * np.cos(k), r * np.sin(k)] for r, k in rings])
+
+
+def _lowest(heights: np.ndarray) -> float:
+    """The least finite of the heights (mm), NaN if none."""
+    return float(np.nanmin(heights)) if np.isfinite(heights).any() else np.nan
 
 
 def _first(heights) -> float:

@@ -134,11 +134,12 @@ def _outward(rim: np.ndarray, centre: np.ndarray, normals: np.ndarray, axis: np.
     a deep nose, up to facing a little backwards) the radial direction has no part along the skin;
     there the flange goes out across the axis in proportion, never back under the wall."""
     radial = rim - centre
-    along = radial - np.einsum("ij,ij->i", radial, normals)[:, None] * normals
-    share = np.linalg.norm(along, axis=1) / np.linalg.norm(radial, axis=1)  # 1: radial lies along the skin
+    length = np.linalg.norm(radial, axis=1, keepdims=True)
+    along = (radial - np.einsum("ij,ij->i", radial, normals)[:, None] * normals) / length
+    share = np.linalg.norm(along, axis=1, keepdims=True)  # 1: radial lies along the skin
     across = radial - np.outer(radial @ axis, axis)
     across /= np.linalg.norm(across, axis=1, keepdims=True)
-    out = along / np.linalg.norm(radial, axis=1, keepdims=True) + (1.0 - share)[:, None] * across
+    out = along + (1.0 - share) * across
     return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
