@@ -6,7 +6,8 @@ drawn from the full ICT model (`load_ict(path)`: all 100 identity modes, `--mode
 ../shared/data/ict_face_model/ict_face_model.npz when present, else the shipped 40 modes), so
 they lie outside the span of the shipped 40 modes a registration may use as its shape prior.
 
-Per design: made or refused (and why), flagged ("rescan advised", with the gates), how the template
+One placement of the template (`place_template`) serves both masks of a scan. Per design: made or
+refused (and why), flagged ("rescan advised", with the gates), how the template
 was placed (landmarks by image, render, or the shape alone), and against the truth (the template
 mapped onto the ICT face, `template_truth`):
 - band: the registered template's contact band of that mask, mean and 95th percentile of the
@@ -14,7 +15,8 @@ mapped onto the ICT face, `template_truth`):
 - curve: the seal curve carried by the registration (the same barycentric points), mean (mm);
 - landmarks: the registered template's Face Mesh landmarks against the model's own Multi-PIE
   landmarks of the same definition, 9 points without the nose tip (mm); the same measure of the
-  truth itself (the correspondence's own definitional offset) is printed beside it.
+  truth itself (the correspondence's own definitional offset) is printed beside it;
+- depth_ratio, face_size: the face's proportions against the template's (`proportions.py`).
 Silently wrong: made, not flagged, band mean over 2 mm; misplaced: band mean over 5 mm (made at all).
 
 Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh] [--masks nasal oronasal]
@@ -41,10 +43,11 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.phantom import FRAMED, to_camera
-from cpapfit.pipeline import design
+from cpapfit.pipeline import design, place_template
 from cpapfit.template import MASKS, load_template
 
 POINTS = (31, 33, 35, 36, 39, 42, 45, 48, 54)  # Multi-PIE: nose base, eye corners, mouth corners (no nose tip)
+INDEX = [MULTIPIE_TO_FACEMESH[p] for p in POINTS]  # their template vertices
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 
 
@@ -70,17 +73,25 @@ def subject(seed: int, kind: str, source: Path | None = None):
         return load_scan(path), head.truth @ turn.T + shift, marks @ turn.T + shift
 
 
-def run(job: tuple[int, str, str, Path | None]) -> dict:
-    """One design of subject `seed` (drawn from the model file `source`, None: the shipped model) as
-    a `kind` scan with a `mask`, measured against its truth."""
-    seed, kind, mask, source = job
+def run(job: tuple[int, str, tuple[str, ...], Path | None]) -> list[dict]:
+    """The designs of subject `seed` (drawn from the model file `source`, None: the shipped model) as
+    a `kind` scan with each of `masks`, from one placement of the template, measured against its truth."""
+    seed, kind, masks, source = job
     scan, truth, marks = subject(seed, kind, source)
-    row = {"seed": seed, "kind": kind, "mask": mask}
-    template = load_template()
-    index = [MULTIPIE_TO_FACEMESH[p] for p in POINTS]
-    row["truth_landmarks_mm"] = float(np.linalg.norm(truth[index] - marks, axis=1).mean())
+    rows = [{"seed": seed, "kind": kind, "mask": mask, "truth_landmarks_mm": float(np.linalg.norm(truth[INDEX] - marks, axis=1).mean())}
+            for mask in masks]
     try:
-        d = design(scan, mask)
+        placed = place_template(scan)
+    except CpapfitError as exc:
+        return [{**row, "outcome": "refused", "reason": str(exc)[:200]} for row in rows]
+    return [_measured(row, scan, placed, truth, marks) for row in rows]
+
+
+def _measured(row: dict, scan, placed, truth: np.ndarray, marks: np.ndarray) -> dict:
+    """`row` with the design of its mask from `placed` against the truth, or why it was refused."""
+    mask, template = row["mask"], load_template()
+    try:
+        d = design(scan, mask, placement=placed)
     except CpapfitError as exc:
         return {**row, "outcome": "refused", "reason": str(exc)[:200]}
     v, fit = d.registration.vertices, d.fits["custom"].summary()
@@ -92,7 +103,8 @@ def run(job: tuple[int, str, str, Path | None]) -> dict:
         "start": d.registration.start,
         "band_mm": float(band.mean()), "band_p95_mm": float(np.percentile(band, 95)),
         "curve_mm": float(np.linalg.norm(curve[0] - curve[1], axis=1).mean()),
-        "landmarks_mm": float(np.linalg.norm(v[index] - marks, axis=1).mean()),
+        "landmarks_mm": float(np.linalg.norm(v[INDEX] - marks, axis=1).mean()),
+        **{g.code: g.value for g in d.quality.gates if g.code in ("depth_ratio", "face_size")},
         "leak_l_min": fit["leak_l_min"], "peak_kpa": fit["pressure_max_kpa"], "window": fit["window_fraction"],
     }
 
@@ -133,10 +145,10 @@ def main() -> None:
     drawn = f"{len(model.identity)} identity modes of {source}" if source else f"the shipped {len(model.identity)} identity modes"
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
           f"{args.first}-{args.first + args.seeds - 1} ({drawn}); {' and '.join(args.kinds)}; {' and '.join(args.masks)}; {args.workers} workers")
-    jobs = [(seed, kind, mask, source) for seed in range(args.first, args.first + args.seeds) for kind in args.kinds for mask in args.masks]
+    jobs = [(seed, kind, tuple(args.masks), source) for seed in range(args.first, args.first + args.seeds) for kind in args.kinds]
     rows, t0 = [], time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
-        for row in pool.map(run, jobs):
+        for row in (r for done in pool.map(run, jobs) for r in done):
             rows.append(row)
             print(" ", json.dumps({k: round(v, 3) if isinstance(v, float) else v for k, v in row.items()}), flush=True)
     if args.rows:

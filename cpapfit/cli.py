@@ -27,7 +27,7 @@ from .landmarks.types import Landmarks
 from .ict.phantom import ict_head_mesh, make_ict_phantom
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
-from .pipeline import Alignment, align, evaluate, face_for, missing_stages, registered, stage_table
+from .pipeline import Alignment, evaluate, face_for, missing_stages, place_template, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -88,7 +88,8 @@ def registration_summary(reg) -> str:
 
 def cmd_register(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
-    al, reg, _ = registered(scan, align(scan, load_user_landmarks(args, scan)))
+    placed = place_template(scan, load_user_landmarks(args, scan))
+    al, reg = placed.alignment, placed.registration
     write_bytes(Path(args.out), registration_ply(reg))
     info(f"{scan.units_note}; {found_by(al.landmarks)}; {registration_summary(reg)} -> {args.out}")
     return 0
@@ -147,8 +148,9 @@ def cmd_evaluate(args) -> int:
     scan = load_scan(Path(args.scan), args.units)
     cushion = load_cushion(Path(args.cushion))
     params = FitParams(cpap_cmh2o=args.cpap)
-    al, reg, _ = registered(scan, align(scan, load_user_landmarks(args, scan)))
-    fits = evaluate(face_for(scan, al, reg), al, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
+    placed = place_template(scan, load_user_landmarks(args, scan))
+    al = placed.alignment
+    fits = evaluate(face_for(scan, al, placed.registration), al, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
     write_bytes(Path(args.out), json_bytes(record))
@@ -235,7 +237,7 @@ def load_user_landmarks(args, scan: Scan):
 def cmd_landmarks(args) -> int:
     """The landmarks and similarity a design would use (detected ones far from the registered face dropped)."""
     scan = load_scan(Path(args.scan), args.units)
-    al, *_ = registered(scan, align(scan, load_user_landmarks(args, scan)))
+    al = place_template(scan, load_user_landmarks(args, scan)).alignment
     fit = al.similarity
     record = landmarks_record(al.landmarks) | {
         "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),

@@ -169,18 +169,38 @@ def _silent(stage: str) -> None:
     """The default stage callback: nothing."""
 
 
+@dataclass(frozen=True)
+class Placement:
+    """The template placed on a scan, whatever the mask: the alignment kept, its registration, and
+    the template registered from the face's shape alone ((n, 3) mm) where detected landmarks are
+    doubtful (else None; `registered`)."""
+
+    alignment: Alignment
+    registration: Registration
+    by_shape: np.ndarray | None
+
+
+def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage: Callable[[str], None] = _silent) -> Placement:
+    """Stages landmarks, similarity and nonrigid: the template aligned and registered on a scan."""
+    on_stage("landmarks and similarity")
+    al = align(scan, user_landmarks)
+    on_stage("non-rigid registration")
+    return Placement(*registered(scan, al))
+
+
 def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
     fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
+    placement: Placement | None = None,
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom and
     the generic cushion onto the face. `on_stage(name)` is called as each stage starts; the mould
-    is made by `submit` (`work.py`), alongside the evaluation when that is a worker process's."""
-    on_stage("landmarks and similarity")
-    al = align(scan, user_landmarks)
-    on_stage("non-rigid registration")
-    al, reg, by_shape = registered(scan, al)  # by_shape: doubtful landmarks' check, where the shape alone puts the template
+    is made by `submit` (`work.py`), alongside the evaluation when that is a worker process's.
+    `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
+    placement serves both masks), else placed here from `user_landmarks` or detection."""
+    placement = placement or place_template(scan, user_landmarks, on_stage)
+    al, reg, by_shape = placement.alignment, placement.registration, placement.by_shape
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)

@@ -10,7 +10,9 @@ it over the vertices matched to the scan; its diagonal is the stretch along the 
 
 size: the face's width and height scale (geometric mean) against the template's, an adult man's
     (synthetic adults 0.83-1.16 over 959 designs, the shared real scans 0.96-0.98);
-depth_ratio: its depth scale over its size (synthetic adults 0.86-1.12, the shared scans 0.97-0.99).
+depth_ratio: its depth scale over its size (synthetic adults 0.86-1.12, the shared scans 0.97-0.99;
+    1 000 ICT Face Model subjects 0.65-1.29 over the part of the face a capture sees, 0.79-1.23 over
+    the whole template: bench/ict_proportions.py).
 A focal length 1.3 times too long reads 1.17-1.29 and a size 1.3 times too small; 1.5 times, 1.29-1.49.
 Twice too long, the detected face fails the face check and the template placed by the shape alone
 follows the face loosely: the depth ratio reads anything from 0.88 to 1.70, the size 0.58-0.72

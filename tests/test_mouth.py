@@ -13,7 +13,7 @@ from cpapfit.io.phantom import write_phantom
 from cpapfit.landmarks.mouth import _gap_in_depth
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.phantom import FRAMED, make_phantom
-from cpapfit.pipeline import align, design
+from cpapfit.pipeline import align, design, place_template
 from cpapfit.quality import QualityParams, _mouth_gates
 from cpapfit.scan import Intrinsics, Scan
 from cpapfit.template import load_template
@@ -70,9 +70,10 @@ def test_the_detected_lips_measure_the_opening(closed_and_open):
 
 def test_an_open_mouth_refuses_the_oronasal_cushion_and_not_the_nasal(closed_and_open):
     _, (opened, scan) = closed_and_open
+    placed = place_template(scan)
     with pytest.raises(QualityError, match="lips_apart_mm.*the mouth is open.*lips closed"):
-        design(scan, "oronasal")
-    nasal = design(scan, "nasal")
+        design(scan, "oronasal", placement=placed)
+    nasal = design(scan, "nasal", placement=placed)
     assert "lips_apart_mm" not in {g.code for g in nasal.quality.gates}
     band = load_template().regions["nasal"].band
     assert np.linalg.norm(nasal.registration.vertices[band] - opened.surface[band], axis=1).mean() < 1.0  # mm

@@ -54,8 +54,11 @@ CAPTURE, MESH = SimpleNamespace(is_capture=True), SimpleNamespace(is_capture=Fal
     (0.75, 1.0, {"face_size"}, set()),
     (0.6, 1.0, {"face_size"}, {"face_size"}),
     (1.3, 1.0, {"face_size"}, set()),
-    (1.0, 0.8, {"depth_ratio"}, set()),
-    (1.0, 1.35, {"depth_ratio"}, {"depth_ratio"}),
+    (1.0, 0.8, set(), set()),
+    (1.0, 0.7, {"depth_ratio"}, set()),
+    (1.0, 1.3, {"depth_ratio"}, set()),
+    (1.0, 1.4, {"depth_ratio"}, {"depth_ratio"}),
+    (1.0, 0.6, {"depth_ratio"}, {"depth_ratio"}),
 ])
 def test_the_shape_gates_judge_each_side(size, ratio, flagged, refused):
     gates = _shape_gates(CAPTURE, Proportions(size, ratio), QualityParams())
