@@ -16,7 +16,8 @@ mapped onto the ICT face, `template_truth`):
 - landmarks: the registered template's Face Mesh landmarks against the model's own Multi-PIE
   landmarks of the same definition, 9 points without the nose tip (mm); the same measure of the
   truth itself (the correspondence's own definitional offset) is printed beside it;
-- depth_ratio, face_size: the face's proportions against the template's (`proportions.py`).
+- depth_ratio, face_size: the face's proportions against the template's (`proportions.py`), and
+  true_depth_ratio: the truth's over the same template vertices (those the registration matched).
 Silently wrong: made, not flagged, band mean over 2 mm; misplaced: band mean over 5 mm (made at all).
 
 Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh] [--masks nasal oronasal]
@@ -29,6 +30,7 @@ import platform
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +46,7 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.phantom import FRAMED, to_camera
 from cpapfit.pipeline import design, place_template
+from cpapfit.proportions import proportions
 from cpapfit.template import MASKS, load_template
 
 POINTS = (31, 33, 35, 36, 39, 42, 45, 48, 54)  # Multi-PIE: nose base, eye corners, mouth corners (no nose tip)
@@ -105,6 +108,7 @@ def _measured(row: dict, scan, placed, truth: np.ndarray, marks: np.ndarray) -> 
         "curve_mm": float(np.linalg.norm(curve[0] - curve[1], axis=1).mean()),
         "landmarks_mm": float(np.linalg.norm(v[INDEX] - marks, axis=1).mean()),
         **{g.code: g.value for g in d.quality.gates if g.code in ("depth_ratio", "face_size")},
+        "true_depth_ratio": proportions(template.vertices, d.alignment.similarity, replace(d.registration, vertices=truth)).depth_ratio,
         "leak_l_min": fit["leak_l_min"], "peak_kpa": fit["pressure_max_kpa"], "window": fit["window_fraction"],
     }
 
@@ -155,6 +159,11 @@ def main() -> None:
         args.rows.write_text("".join(json.dumps(r) + "\n" for r in rows))
     print()
     print(table(rows))
+    made = [r for r in rows if r["outcome"] == "made" and "depth_ratio" in r]
+    if made:
+        off = np.array([r["depth_ratio"] - r["true_depth_ratio"] for r in made])
+        print(f"\ndepth ratio read against the truth's over the same vertices: mean {off.mean():+.3f}, largest |difference| "
+              f"{np.abs(off).max():.3f}; read {min(r['depth_ratio'] for r in made):.3f}-{max(r['depth_ratio'] for r in made):.3f}")
     print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
 
 

@@ -9,7 +9,7 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.write import write_files
-from cpapfit.pipeline import design
+from cpapfit.pipeline import design, place_template
 from cpapfit.phantom import make_phantom
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -29,14 +29,29 @@ def phantom1_dir(tmp_path_factory, phantom1):
     return folder
 
 
+@pytest.fixture(scope="session")
+def placed_subjects(tmp_path_factory):
+    """seed -> (phantom, capture scan, `Placement`) of a synthetic subject, made once (both masks' designs share it)."""
+    made = {}
+
+    def placed(seed: int):
+        if seed not in made:
+            ph = make_phantom(seed)
+            folder = tmp_path_factory.mktemp(f"design{seed}")
+            write_files(folder, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+            scan = load_scan(folder)
+            made[seed] = ph, scan, place_template(scan)
+        return made[seed]
+
+    return placed
+
+
 @pytest.fixture(scope="session", params=[(3, "nasal"), (3, "oronasal"), (2, "nasal"), (2, "oronasal")], ids=str)
-def designed(request, tmp_path_factory):
+def designed(request, placed_subjects):
     """(phantom, Design) for two synthetic subjects and both masks."""
     seed, mask = request.param
-    ph = make_phantom(seed)
-    folder = tmp_path_factory.mktemp(f"design{seed}{mask}")
-    write_files(folder, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
-    return ph, design(load_scan(folder), mask)
+    ph, scan, placed = placed_subjects(seed)
+    return ph, design(scan, mask, placement=placed)
 
 
 @pytest.fixture

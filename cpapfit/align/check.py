@@ -13,7 +13,9 @@ Measures of the template's central face, carried by the similarity onto the scan
   scan: the median first hit of a bundle of rays cast back along the forward direction within
   PROBE_MM across (a point cloud through a surface over its points facing that way). A column of
   points would also hold what lies behind the skin (a modelled head's nostril and lip insides
-  read a nose tip as standing -4 to +3 mm above its sides), and one ray the noise's highest point;
+  read a nose tip as standing -4 to +3 mm above its sides), and one ray the noise's highest point.
+  A nose lower than that but at least LOW_NOSE_MM (`FaceCheck.low_nose`: a flat nose, or a face
+  the alignment pitched) passes only with a second look's agreement (`initial.py`);
 - scale: the similarity's, template to scan. Adult faces differ from the template (an average
   adult's) by ~10 % in size; a face "found" at half or twice its size is another shape mistaken
   for one (a render's shading, a face seen at the wrong distance), or a scan in other units;
@@ -22,7 +24,7 @@ Measures of the template's central face, carried by the similarity onto the scan
   inside of a face shell seen from behind (a hollow mask), whose points are a face's.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -48,6 +50,7 @@ MIN_COVERAGE = 0.5
 MAX_MEDIAN_GAP_MM = 3.5
 MIN_RIDGE_MM = 6.0
 MIN_BELOW_MM = 8.0
+LOW_NOSE_MM = 2.5  # a nose this high above its sides and below, short of the two above, passes with a second look's agreement
 SCALE_RANGE = (0.7, 1.4)
 MAX_TURNED_DEG = 90.0
 
@@ -74,6 +77,13 @@ class FaceCheck:
             and self.ridge_mm >= MIN_RIDGE_MM and self.below_mm >= MIN_BELOW_MM
             and SCALE_RANGE[0] <= self.scale <= SCALE_RANGE[1] and not self.turned_deg > MAX_TURNED_DEG
         )
+
+    @property
+    def low_nose(self) -> bool:
+        """A face by every measure but its nose's, which rises LOW_NOSE_MM or more above its sides
+        and below it but short of MIN_RIDGE_MM or MIN_BELOW_MM: a flat nose, or a bump that is no nose."""
+        low = self.ridge_mm >= LOW_NOSE_MM and self.below_mm >= LOW_NOSE_MM  # False with NaN
+        return low and not self.is_face and replace(self, ridge_mm=max(self.ridge_mm, MIN_RIDGE_MM), below_mm=max(self.below_mm, MIN_BELOW_MM)).is_face
 
     def describe(self) -> str:
         sides = f"{self.ridge_mm:.1f} mm above its sides (at least {MIN_RIDGE_MM})" if np.isfinite(self.ridge_mm) else "no scan beside it"

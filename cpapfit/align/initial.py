@@ -25,6 +25,9 @@ FRONT_SIZE = 1.25
 # A detection failing the face check and the shape's own placement this far apart (mean, mm, over both
 # masks' contact bands): one of them is on the wrong part of the face, and the design is refused.
 DISAGREE_MM = 10.0
+# A capture's second look, only to agree or not with its image's low-nosed face (`_agreed`): MediaPipe
+# on a render of its depth, without colours, from in front of that face.
+SECOND_LOOK = "a render of the depth" + WITHOUT_COLOURS
 
 
 def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
@@ -38,25 +41,57 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     (meshes, and point clouds through a surface over their points: a capture's own image is the
     best view there is); the fallback itself. The winner's `rejected` names those that failed the face
     check (a capture's colour image not registered to its depth puts the detected face off the
-    scanned one). If none lies on a face the scan is refused (InputError)."""
+    scanned one). A candidate that fails the check only by a low nose (`FaceCheck.low_nose`) wins
+    when a later one, or a capture's SECOND_LOOK, places the mask region within DISAGREE_MM of it
+    (`_agreed`). If none lies on a face the scan is refused (InputError)."""
     central = central_face(template)
     if user is not None:
         fit = fit_similarity(template.vertices[user.template_index], user.points)
         candidates = [("user", Detection(replace(user, confidence=fit.weights, path="user", note="user landmarks file"), fit, len(user.points)))]
     else:
         candidates = _candidates(scan, template)
-    failed = []
-    for label, found in candidates:
-        check = check_face(scan, template, found.similarity, central)
-        if check.is_face:
-            break
-        failed.append((label, found))
-    across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
-    require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture, across)
+    found, check, failed, agreed = _first_face(scan, template, candidates, central)
+    if not agreed:
+        across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
+        require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture, across)
     if found.landmarks.path == "fallback":
         require_agreement(template, found.similarity, failed)
     rejected = f"the face found by {' and '.join(dict.fromkeys(label for label, _ in failed))} failed the face check" if failed else ""
     return replace(found.landmarks, rejected=rejected), found.similarity, check
+
+
+def _first_face(scan: Scan, template: Template, candidates, central: np.ndarray) -> tuple[Detection, FaceCheck, list[tuple[str, Detection]], bool]:
+    """The first candidate that passes the face check, or a low-nosed one a later candidate agrees
+    with (`_agreed`); its check; the (label, detection) of those that failed before it; and whether
+    it was agreed. With none, the last candidate and its failed check."""
+    failed, low = [], []
+    for label, found in candidates:
+        agreed = _agreed(template, found, label, low)
+        if agreed is not None:
+            return agreed[0], agreed[1], [f for f in failed if f[1] is not agreed[2]], True
+        if label == SECOND_LOOK:
+            continue
+        check = check_face(scan, template, found.similarity, central)
+        if check.is_face:
+            break
+        if check.low_nose:
+            low.append((label, found, check))
+        failed.append((label, found))
+    return found, check, failed, False
+
+
+def _agreed(template: Template, found: Detection, label: str, low: list[tuple[str, Detection, FaceCheck]]) -> tuple[Detection, FaceCheck, Detection] | None:
+    """(noted detection, its check, the one it was) of the first earlier low-nosed candidate in `low`
+    (`FaceCheck.low_nose`) that `found`, by `label`, places within DISAGREE_MM (mean over both
+    masks' contact bands); else None. Two looks that agree on a face whose nose is flat (an ICT
+    subject's tip 4.3-6.9 mm above the face around it) are not both misled by what misleads one."""
+    for first, det, check in low:
+        apart = _apart(template, det.similarity, found.similarity)
+        if apart <= DISAGREE_MM:
+            note = (f"{det.landmarks.note}; a low nose ({check.ridge_mm:.1f} mm above its sides, {check.below_mm:.1f} mm above "
+                    f"the lip), and {label} places the mask region {apart:.1f} mm from where {first} does")
+            return Detection(replace(det.landmarks, note=note), det.similarity, det.inliers), check, det
+    return None
 
 
 def require_agreement(template: Template, shape: Similarity, failed: list[tuple[str, Detection]]) -> None:
@@ -65,16 +100,21 @@ def require_agreement(template: Template, shape: Similarity, failed: list[tuple[
     over DISAGREE_MM apart (mean): one of them lies on the wrong part of the face, and neither the
     geometry nor the face check can tell which (an ICT subject's nasal cushion landed on the lips,
     45 mm off, placed by the shape; a colour image 3 cm off its depth puts the detection off)."""
-    region = template.vertices[mask_region(template)]
     for label, det in failed:
         if det.landmarks.path == "fallback":
             continue
-        apart = float(np.linalg.norm(det.similarity.apply(region) - shape.apply(region), axis=1).mean())
+        apart = _apart(template, det.similarity, shape)
         if apart > DISAGREE_MM:
             raise InputError(
                 f"the face found by {label} (which failed the face check) and the face's shape alone place the mask region "
                 f"{apart:.0f} mm apart (at most {DISAGREE_MM:g}): one of them is on the wrong part of the face; does the colour "
                 "image line up with the depth? give landmarks with --landmarks, or rescan facing the camera")
+
+
+def _apart(template: Template, one: Similarity, other: Similarity) -> float:
+    """Mean distance (mm) between the template's mask region (both masks' contact bands) placed by `one` and by `other`."""
+    region = template.vertices[mask_region(template)]
+    return float(np.linalg.norm(one.apply(region) - other.apply(region), axis=1).mean())
 
 
 def landmark_free_alignment(scan: Scan, template: Template, rejected: str) -> tuple[Landmarks, Similarity, FaceCheck] | None:
@@ -94,6 +134,10 @@ def _candidates(scan: Scan, template: Template) -> Iterator[tuple[str, Detection
         if det is not None:
             note = det.landmarks.note + (f"; on renders{without}" if without else "")
             yield det.landmarks.path + without, Detection(replace(det.landmarks, note=note), det.similarity, det.inliers)
+            if scan.is_capture:
+                second = detect_from_front(replace(scan, colors=None, texture=None, uv=None), template, det.similarity)
+                if second is not None:
+                    yield SECOND_LOOK, second
     landmarks, fit = fallback_alignment(scan, template)
     front = None if scan.is_capture else detect_from_front(_renderable(scan, fit), template, fit)
     if front is not None and 1.0 / FRONT_SIZE <= front.similarity.scale / fit.scale <= FRONT_SIZE:
