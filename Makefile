@@ -20,9 +20,9 @@ $(STAMP): pyproject.toml requirements.lock
 demo: $(STAMP)
 	$(VENV)/bin/cpapfit demo
 
-# Two worker processes (pytest-xdist): most tests use one core, and CI has two.
+# Two worker processes (pytest-xdist): most tests use one core, and CI has two; the 15 slowest tests listed.
 test: $(STAMP) $(CHROMIUM)
-	$(PY) -m pytest -q -n 2
+	$(PY) -m pytest -q -n 2 --durations=15
 
 # The report test opens report.html in headless Chromium: Debian's package, no browser download.
 $(CHROMIUM):
