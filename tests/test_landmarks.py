@@ -556,15 +556,16 @@ def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, 
     """Detected landmarks the registration drops (15 mm to the side, as above) are not written either."""
     from dataclasses import replace
 
-    from cpapfit import cli as command
-    from cpapfit.pipeline import align
+    from cpapfit import pipeline
+
+    align = pipeline.align
 
     def stray(scan, user=None):
         al = align(scan, user)
         moved = scan.vertices[cKDTree(scan.vertices).query(al.landmarks.points + 15.0 * al.similarity.rotation[:, 0])[1]]
         return replace(al, landmarks=replace(al.landmarks, points=moved))
 
-    monkeypatch.setattr(command, "align", stray)
+    monkeypatch.setattr(pipeline, "align", stray)
     code, _, err = cli("landmarks", phantom1_dir, "--out", tmp_path / "lm.json")
     record = json.loads((tmp_path / "lm.json").read_text())
     assert code == 0 and record["path"] == "fallback" and "from their places on the registered face" in record["rejected"], err
