@@ -1,4 +1,5 @@
-"""Robustness study (issue 9): synthetic subjects under landmark noise, holes over the mask region,
+"""Robustness study: synthetic subjects (the template deformed, or ICT Face Model subjects with
+`--population`) under landmark noise, holes over the mask region,
 sensor noise, a cheap camera far away, head yaw, a misstated depth scale or focal length and a colour image
 not registered to its depth, each designed end to end (`pipeline.design`, nasal mask).
 
@@ -17,6 +18,7 @@ registration's own error): the mask is then as much too large or small as the sc
 the face's proportions can tell (`face_size`, `depth_ratio`: see the flagged and refused columns).
 
 Usage: .venv/bin/python bench/robustness.py [--seeds 5] [--other-seeds N] [--first 100] [--workers 2] [--only NAME ...]
+       [--population template | ICT_MODEL_NPZ | shipped]
 (seeds 100+ by default: the quality gates were calibrated on seeds 0-13; --other-seeds: how many
 for the levels that are not moderate, default --seeds; --only: the rows whose condition and level,
 "name level", contain NAME, e.g. "yaw (deg) 20".)
@@ -28,6 +30,7 @@ import tempfile
 import time
 from collections import defaultdict
 from dataclasses import replace
+from functools import partial
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from unittest.mock import patch
@@ -37,6 +40,8 @@ from scipy.spatial import cKDTree
 
 from cpapfit.align.similarity import fit_similarity
 from cpapfit.errors import CpapfitError
+from cpapfit.ict import load_ict
+from cpapfit.ict.phantom import make_ict_phantom
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.detect import Detection, detect_landmarks
@@ -48,27 +53,28 @@ from cpapfit.template import load_template
 
 REGION = mask_region(load_template())
 
-# (condition, level, moderate, how the subject is made): subject(seed) -> run()'s keywords: the
-# phantom, and what is misstated or added (depth_scale and focal length factors, landmark noise mm, a user file)
+# (condition, level, moderate, how the subject is made): subject(seed, make) -> run()'s keywords: the
+# phantom (`make(seed, ...)`: the population's generator), and what is misstated or added (depth_scale
+# and focal length factors, landmark noise mm, a user file)
 CONDITIONS = [
-    ("clean", "-", True, lambda s: dict(ph=make_phantom(s, pose=FRAMED))),
-    *[("detected landmark noise sigma (mm)", f"{x:g}", x <= 2, lambda s, x=x: dict(ph=make_phantom(s, pose=FRAMED), sigma=x))
+    ("clean", "-", True, lambda s, make: dict(ph=make(s, pose=FRAMED))),
+    *[("detected landmark noise sigma (mm)", f"{x:g}", x <= 2, lambda s, make, x=x: dict(ph=make(s, pose=FRAMED), sigma=x))
       for x in (1.0, 2.0, 5.0)],
-    ("user landmarks file, noise sigma (mm)", "2", True, lambda s: dict(ph=make_phantom(s, pose=FRAMED), sigma=2.0, user=True)),
+    ("user landmarks file, noise sigma (mm)", "2", True, lambda s, make: dict(ph=make(s, pose=FRAMED), sigma=2.0, user=True)),
     *[("holes over the mask region", f"{100 * x:.0f} %", x <= 0.1,
-       lambda s, x=x: dict(ph=with_holes(make_phantom(s, pose=FRAMED), REGION, x, s))) for x in (0.1, 0.3)],
+       lambda s, make, x=x: dict(ph=with_holes(make(s, pose=FRAMED), REGION, x, s))) for x in (0.1, 0.3)],
     *[("sensor noise sigma at 500 mm (mm)", f"{x:g}", x <= 0.5,
-       lambda s, x=x: dict(ph=make_phantom(s, SensorModel(noise_mm_at_500=x), pose=FRAMED))) for x in (0.5, 1.0)],
+       lambda s, make, x=x: dict(ph=make(s, SensorModel(noise_mm_at_500=x), pose=FRAMED))) for x in (0.5, 1.0)],
     ("cheap camera (Kinect v1 model) at distance (mm)", "1000", False,
-     lambda s: dict(ph=make_phantom(s, KINECT_V1, distance_mm=1000.0, pose=FRAMED))),
-    *[("yaw (deg)", f"{x:g}", x <= 20, lambda s, x=x: dict(ph=make_phantom(s, yaw_deg=x, pose=FRAMED))) for x in (0.0, 20.0, 40.0)],
-    *[("scale error (depth_scale misstated)", f"x{x:g}", True, lambda s, x=x: dict(ph=make_phantom(s, pose=FRAMED), scale=x))
+     lambda s, make: dict(ph=make(s, KINECT_V1, distance_mm=1000.0, pose=FRAMED))),
+    *[("yaw (deg)", f"{x:g}", x <= 20, lambda s, make, x=x: dict(ph=make(s, yaw_deg=x, pose=FRAMED))) for x in (0.0, 20.0, 40.0)],
+    *[("scale error (depth_scale misstated)", f"x{x:g}", True, lambda s, make, x=x: dict(ph=make(s, pose=FRAMED), scale=x))
       for x in (0.9, 1.1)],
-    *[("focal length misstated (fx, fy)", f"x{x:g}", False, lambda s, x=x: dict(ph=make_phantom(s, pose=FRAMED), focal=x))
+    *[("focal length misstated (fx, fy)", f"x{x:g}", False, lambda s, make, x=x: dict(ph=make(s, pose=FRAMED), focal=x))
       for x in (1.15, 1.3, 1.5)],
     *[("colour image shifted sideways from its depth (px, ~mm)", f"{x}", False,
-       lambda s, x=x: dict(ph=with_colour_shift(make_phantom(s, pose=FRAMED), x))) for x in (8, 16)],
-    ("any pose (yaw, pitch +-25 deg, roll +-15 deg, anywhere in view)", "-", False, lambda s: dict(ph=make_phantom(s, pose=ANY_POSE))),
+       lambda s, make, x=x: dict(ph=with_colour_shift(make(s, pose=FRAMED), x))) for x in (8, 16)],
+    ("any pose (yaw, pitch +-25 deg, roll +-15 deg, anywhere in view)", "-", False, lambda s, make: dict(ph=make(s, pose=ANY_POSE))),
 ]
 
 
@@ -118,10 +124,11 @@ def run(seed: int, ph, scale: float = 1.0, sigma: float = 0.0, user: bool = Fals
             "spread": round(d.registration.landmark_spread_mm, 2), **shape}
 
 
-def one(job: tuple[int, int]) -> dict:
-    """The design of condition number `c` on subject `seed` (in a worker process)."""
-    c, seed = job
-    return run(seed, **CONDITIONS[c][3](seed))
+def one(job: tuple[int, int, str]) -> dict:
+    """The design of condition number `c` on subject `seed` of `population` (in a worker process)."""
+    c, seed, population = job
+    make = make_phantom if population == "template" else partial(make_ict_phantom, model=load_ict(None if population == "shipped" else Path(population)))
+    return run(seed, **CONDITIONS[c][3](seed, make))
 
 
 def summary(rows: list[dict]) -> str:
@@ -142,16 +149,19 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=100)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--only", action="append", default=None, help="run the rows whose 'condition level' contains this (repeatable)")
+    ap.add_argument("--population", default="template",
+                    help="'template' (the template deformed, `make_phantom`), or ICT subjects (`make_ict_phantom`) drawn from "
+                    "the ICT model file at this path (all its identity modes), or 'shipped' (the package's 40 modes)")
     args = ap.parse_args()
     other = args.seeds if args.other_seeds is None else args.other_seeds
     print(f"machine: {platform.machine()}, Python {platform.python_version()}; seeds from {args.first}: "
-          f"{args.seeds} per moderate level, {other} per other level; nasal mask")
+          f"{args.seeds} per moderate level, {other} per other level; nasal mask; population {args.population}")
     results, reasons, t0 = {}, defaultdict(int), time.perf_counter()
-    jobs = [(c, seed) for c, (name, level, moderate, _) in enumerate(CONDITIONS)
+    jobs = [(c, seed, str(args.population)) for c, (name, level, moderate, _) in enumerate(CONDITIONS)
             if args.only is None or any(o in f"{name} {level}" for o in args.only)
             for seed in range(args.first, args.first + (args.seeds if moderate else other))]
     with ProcessPoolExecutor(args.workers) as pool:
-        for (c, seed), row in zip(jobs, pool.map(one, jobs)):
+        for (c, seed, _), row in zip(jobs, pool.map(one, jobs)):
             condition, level, moderate, _ = CONDITIONS[c]
             level = f"{level} (moderate)" if moderate else level
             results.setdefault((condition, level), []).append(row)
