@@ -133,7 +133,7 @@ class QualityParams:
     large_face_refuse: float = 1.5
     flat_face_flag: float = 0.75
     flat_face_refuse: float = 0.62
-    deep_face_flag: float = 1.22
+    deep_face_flag: float = 1.18
     deep_face_refuse: float = 1.35
     in_front_flag_mm2: float = 30.0
     in_front_refuse_mm2: float = 150.0
