@@ -13,11 +13,13 @@ import numpy as np
 
 from . import __version__
 from .errors import CpapfitError, InputError
+from .cushion.nurbs import CushionParams
 from .evaluate.fit import FitParams
+from .evaluate.states import fit_states, sleep_states
 from .io import load_scan
 from .io.cushion import load_cushion
 from .io.landmarks import landmarks_record
-from .io.design import evaluation_record, registration_ply
+from .io.design import evaluation_record, registration_ply, states_record
 from .io.phantom import write_head_mesh, write_phantom
 from .io.summary import counts, summary_csv, summary_html
 from .io.units import UNIT_CHOICES
@@ -27,7 +29,7 @@ from .landmarks.types import Landmarks
 from .ict.phantom import ict_head_mesh, make_ict_phantom
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
-from .pipeline import Alignment, evaluate, face_for, missing_stages, place_template, stage_table
+from .pipeline import Alignment, evaluate, evaluated_cushions, face_for, missing_stages, place_template, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
@@ -123,9 +125,32 @@ def fit_summary(fit: dict) -> str:
     return "; ".join(lines)
 
 
+def state_summary(row: dict) -> str:
+    """One line on a state of fit.json's `states`: each cushion's leak and peak pressure."""
+    if "error" in row:
+        return f"{row['name']}: not evaluated ({row['error']})"
+    cells = [f"{name} leak {row[name]['leak_l_min']:.1f} L/min, peak {row[name]['pressure_max_kpa']:.2f} kPa"
+             for name in ("custom", "generic") if name in row]
+    return f"{row['name']}: {'; '.join(cells)}"
+
+
+def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
+    """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`, and its worst."""
+    states = [row for row in fit.get("states", [])[1:] if "error" not in row]
+    parts = []
+    for name in ("custom", "generic"):
+        rows = [row for row in states if name in row]
+        if rows:
+            worst = max(rows, key=lambda row: row[name]["leak_l_min"])
+            over = sum(row[name]["leak_l_min"] > leak_l_min for row in rows)
+            parts.append(f"{name} leaks over {leak_l_min:g} L/min in {over} of {len(rows)} (worst: {worst['name']}, "
+                         f"{worst[name]['leak_l_min']:.1f} L/min)")
+    return f"asleep: {'; '.join(parts)}" if parts else "asleep: not evaluated"
+
+
 def report_summary(out: Path, fit: dict) -> str:
-    """Where the report is and its headline numbers (custom vs generic)."""
-    return f"report: {out / 'report.html'} (open it in a browser)\n  {fit_summary(fit)}"
+    """Where the report is and its headline numbers (custom vs generic, awake and asleep)."""
+    return f"report: {out / 'report.html'} (open it in a browser)\n  {fit_summary(fit)}\n  {asleep_summary(fit)}"
 
 
 def cmd_design(args) -> int:
@@ -139,8 +164,8 @@ def cmd_design(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    if args.generic and not args.mask:
-        raise CpapfitError("--generic needs --mask nasal|oronasal: which stock cushion to compare with")
+    if (args.generic or args.states) and not args.mask:
+        raise CpapfitError("--generic and --states need --mask nasal|oronasal: which stock cushion to compare with, which states to press")
     if not 0 < args.cpap <= 30:
         raise CpapfitError(f"--cpap {args.cpap:g} cmH2O: CPAP pressures run from about 4 to 20 cmH2O")
     if args.force is not None and not 0 < args.force <= 200:
@@ -149,12 +174,18 @@ def cmd_evaluate(args) -> int:
     cushion = load_cushion(Path(args.cushion))
     params = FitParams(cpap_cmh2o=args.cpap)
     placed = place_template(scan, load_user_landmarks(args, scan))
-    al = placed.alignment
-    fits = evaluate(face_for(scan, al, placed.registration), al, cushion, args.mask if args.generic else None, fit_params=params, force_n=args.force)
+    face = face_for(scan, placed.alignment, placed.registration)
+    cushions = evaluated_cushions(placed.alignment, cushion, args.mask if args.generic else None)
+    fits = evaluate(face, cushions, fit_params=params, force_n=args.force)
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
+    if args.states:
+        states = fit_states(cushions, face, sleep_states(args.mask), CushionParams().flange_mm, fits["custom"].force_n, params)
+        record["states"] = states_record(fits, states, params.cpap_cmh2o)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")
+    for row in record.get("states", [])[1:]:
+        info(f"  {state_summary(row)}")
     return 0
 
 
@@ -305,7 +336,9 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
             p.add_argument("--generic", action="store_true", help="also evaluate the generic (stock) cushion of --mask")
-            p.add_argument("--mask", choices=["nasal", "oronasal"], help="the stock cushion for --generic")
+            p.add_argument("--mask", choices=["nasal", "oronasal"], help="the stock cushion for --generic, the states for --states")
+            p.add_argument("--states", action="store_true",
+                           help="also press the cushions onto the face asleep: mouth open, mask pushed by a pillow, CPAP 4 and 20 cmH2O")
             p.add_argument("--force", type=float, help="headgear force in N (default: the force recommended for this cushion)")
             p.add_argument("--cpap", type=float, default=10.0, help="CPAP pressure in cmH2O (default 10)")
         p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design, "evaluate": cmd_evaluate}[name])

@@ -19,6 +19,7 @@ from .cushion.generic import NOSE_TIP, place, template_cushion
 from .compensation import Preload, compensated_cushion
 from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
+from .evaluate.states import StateFit, fit_states, sleep_states
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
 from .proportions import proportions
@@ -159,6 +160,7 @@ class Design:
     mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
     fits: dict  # {"custom" | "generic": CushionFit}, both at the custom cushion's recommended force
     fit_params: FitParams
+    states: tuple[StateFit, ...]  # both cushions in each sleep state (`sleep_states`), at the same force
 
     def preload_at(self, points: np.ndarray) -> np.ndarray:
         """(K,) mm: the pre-load at the seal-curve point nearest each of (K, 3) `points`."""
@@ -215,10 +217,12 @@ def design(
     checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould")
     moulding = submit(checked_mould, cushion, solid)
-    fits = evaluate(face, al, solid, mask, params, fit_params)
+    cushions = evaluated_cushions(al, solid, mask, params)
+    fits = evaluate(face, cushions, params, fit_params)
+    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params)
     moulded = moulding.result()
     return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload,
-                  moulded.parts, moulded.draft, fits, fit_params)
+                  moulded.parts, moulded.draft, fits, fit_params, states)
 
 
 def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):
@@ -251,15 +255,23 @@ def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
     return face_of(scan_surface(scan), reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 
-def evaluate(
-    face: Face, al: Alignment, custom: trimesh.Trimesh, generic_mask: str | None,
-    params: CushionParams = CushionParams(), fit_params: FitParams = FitParams(), force_n: float | None = None,
-) -> dict[str, CushionFit]:
-    """Stage evaluate: a cushion mesh ("custom") and, for a `generic_mask`, the generic cushion (the
-    same design on the template, placed by the similarity) pressed onto the face at the same
-    headgear force (`force_n`, or the one the custom cushion is designed for)."""
-    fits = {"custom": fit_cushion(custom, face, params.flange_mm, force_n, fit_params)}
+def evaluated_cushions(
+    al: Alignment, custom: trimesh.Trimesh, generic_mask: str | None, params: CushionParams = CushionParams(),
+) -> dict[str, trimesh.Trimesh]:
+    """The cushion meshes an evaluation presses onto the face: "custom", and for a `generic_mask`
+    "generic" (the same design on the template, placed by the similarity)."""
+    cushions = {"custom": custom}
     if generic_mask:
-        generic = cushion_sheet(place(template_cushion(generic_mask, params), al.similarity))
-        fits["generic"] = fit_cushion(generic, face, params.flange_mm, fits["custom"].force_n, fit_params)
-    return fits
+        cushions["generic"] = cushion_sheet(place(template_cushion(generic_mask, params), al.similarity))
+    return cushions
+
+
+def evaluate(
+    face: Face, cushions: dict[str, trimesh.Trimesh], params: CushionParams = CushionParams(),
+    fit_params: FitParams = FitParams(), force_n: float | None = None,
+) -> dict[str, CushionFit]:
+    """Stage evaluate: the `evaluated_cushions` pressed onto the face at one headgear force
+    (`force_n`, or the one the custom cushion is designed for)."""
+    fits = {"custom": fit_cushion(cushions["custom"], face, params.flange_mm, force_n, fit_params)}
+    force = fits["custom"].force_n
+    return fits | {name: fit_cushion(mesh, face, params.flange_mm, force, fit_params) for name, mesh in cushions.items() if name != "custom"}

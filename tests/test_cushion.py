@@ -73,7 +73,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
                      "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
                      "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png",
-                     "rim_pressure.png", "rim_pressure_profile.png", "leak.png"}
+                     "rim_pressure.png", "rim_pressure_profile.png", "leak.png", "states_pressure.png"}
     assert f"report: {out / 'report.html'}" in err
     curve = json.loads((out / "contact_curve.json").read_text())
     pts = np.array(curve["points"])
@@ -87,13 +87,18 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     for key in ("cpap_cmh2o", "headgear_force_n", "custom", "generic", "tissue_model", "cpapfit_version"):
         assert key in fit
     evaluated = tmp_path / "evaluated.json"
-    code, _, err = cli("evaluate", phantom1_dir, "--cushion", out / "cushion.stl", "--out", evaluated)
+    code, _, err = cli("evaluate", phantom1_dir, "--cushion", out / "cushion.stl", "--mask", "oronasal", "--states", "--out", evaluated)
     assert code == 0, err
     again = json.loads(evaluated.read_text())  # the written STL, evaluated alone, gives design's numbers
-    assert set(again) >= {"cpap_cmh2o", "headgear_force_n", "custom", "tissue_model"} and "generic" not in again
+    assert set(again) >= {"cpap_cmh2o", "headgear_force_n", "custom", "tissue_model", "states"} and "generic" not in again
     assert again["headgear_force_n"] == pytest.approx(fit["headgear_force_n"], abs=0.01)
     for key in ("pressure_mean_kpa", "pressure_max_kpa", "leak_l_min"):
         assert again["custom"][key] == pytest.approx(fit["custom"][key], abs=0.01), key
+    assert [s["name"] for s in again["states"]] == [s["name"] for s in fit["states"]] and len(fit["states"]) == 8
+    for state, designed_state in zip(again["states"], fit["states"]):  # each state of the sleeping face, alike
+        for key in ("leak_l_min", "pressure_max_kpa"):
+            assert state["custom"][key] == pytest.approx(designed_state["custom"][key], abs=0.05), (state["name"], key)
+    assert "mouth open 13 mm" in err
 
 
 def test_3mf_is_in_millimetres_and_deterministic(designed):

@@ -48,6 +48,7 @@ EXPECTED_SIZES = {  # (width, height) px: panels of 640 x 480 with titles, colou
     "scan_landmarks.png": (780, 570), "registration_residual.png": (780, 570), "contact_curve.png": (1300, 605),
     "cushion_on_face.png": (1300, 570), "rim_gap.png": (1420, 605), "rim_gap_profile.png": (900, 420),
     "rim_pressure.png": (1420, 605), "rim_pressure_profile.png": (900, 420), "leak.png": (1300, 605),
+    "states_pressure.png": (2700, 1125),
 }
 
 
@@ -133,7 +134,7 @@ def shown_numbers_match(shown: list, fit: dict) -> None:
     for key, scale, text in shown:
         value = fit
         for part in key.split("."):
-            value = value[part]
+            value = value[int(part)] if isinstance(value, list) else value[part]
         decimals = len(text.split(".")[1]) if "." in text else 0
         assert math.isclose(float(text), value * float(scale), abs_tol=0.5 * 10 ** -decimals + 1e-9), (key, text, value)
 
@@ -157,7 +158,7 @@ def test_report_html_in_headless_chromium_offline(report, tmp_path):
     assert resources == []  # nothing fetched: everything is inline
     keys = {k for k, _, _ in shown}
     assert {"headgear_force_n", "custom.pressure_max_kpa", "generic.leak_l_min", "custom.window_fraction",
-            "cushion.min_wall_mm"} <= keys
+            "cushion.min_wall_mm", "states.2.custom.leak_l_min", "states.7.generic.pressure_max_kpa"} <= keys
     shown_numbers_match(shown, fit)
     skin = (np.abs(shot - [217, 192, 173]).max(axis=2) < 60).mean()  # the face, shaded
     green = ((shot[..., 1] > shot[..., 0] + 30) & (shot[..., 1] > shot[..., 2])).mean()  # the custom cushion, in the window

@@ -75,10 +75,10 @@ def ict_basis(template: np.ndarray, faces: np.ndarray, modes: int) -> ShapeBasis
 
     fields = np.concatenate([(on_template(model.neutral) - template)[None], on_template(model.identity[:modes])])
     prior = np.concatenate([[0.0], np.ones(modes)])
-    return ShapeBasis(template, _smoothed(fields, template, faces), prior)
+    return ShapeBasis(template, smooth_fields(fields, template, faces), prior)
 
 
-def _smoothed(fields: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def smooth_fields(fields: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(M, N, 3) displacement fields of the (N, 3) mm template smoothed implicitly, (I + SMOOTHING L) X =
     fields (L its cotangent Laplacian): closest points on the ICT skin fold the template's triangles
     over in creases (582 turned over by the neutral alone, at the nostrils, lips and eyes), and a

@@ -150,7 +150,11 @@ def face_of(surface: trimesh.Trimesh | trimesh.PointCloud, warped: np.ndarray, a
 def fit_cushion(cushion: trimesh.Trimesh, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams()) -> CushionFit:
     """A cushion mesh (mm, scan frame) pressed onto a face along its mask axis at `force_n` N
     (None: the recommended force for this rim); `width_mm` the seal flange width."""
-    rim = find_rim(cushion, face.scan, face.registered, face.axis, face.up)
+    return fit_rim(find_rim(cushion, face.scan, face.registered, face.axis, face.up), face, width_mm, force_n, params)
+
+
+def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams()) -> CushionFit:
+    """`fit_cushion` of a cushion whose contact line on this face is `rim`."""
     k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
     pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)

@@ -74,7 +74,7 @@ def find_rim(
     FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
     of the face counts: the cushion would press on it); InputError if less than
     MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
-    vertices, _ = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM)
+    vertices = refined(cushion).vertices
     on_face, _, face_cos = _look_down(vertices, face_mesh, axis)
     plane = in_plane(axis, up)
     uv = (vertices - vertices.mean(axis=0)) @ plane.T
@@ -93,6 +93,14 @@ def find_rim(
                          f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
+
+
+def refined(cushion: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The cushion mesh with no edge longer than REFINE_MM (a refined mesh is its own refinement)."""
+    corners = cushion.vertices[cushion.faces]
+    if np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max() <= REFINE_MM:
+        return cushion
+    return trimesh.Trimesh(*trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM), process=False)
 
 
 def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:

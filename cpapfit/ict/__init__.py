@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import InputError
 from ..frozen import freeze_arrays
 
+LOWER_INNER_LIP = 14  # the template landmark whose drop is a mouth's opening (`jaw_open_weight`, face states)
 EXPRESSIONS = (
     "jawOpen", "mouthClose", "jawLeft", "jawRight", "jawForward", "mouthLowerDown_L", "mouthLowerDown_R",
     "mouthFunnel", "mouthStretch_L", "mouthStretch_R",

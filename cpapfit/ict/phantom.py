@@ -25,9 +25,8 @@ from ..phantom import (
 )
 from ..render import raycast
 from ..template import load_template
-from . import IctModel, ict_face, load_ict, template_truth
+from . import LOWER_INNER_LIP, IctModel, ict_face, load_ict, template_truth
 
-LOWER_INNER_LIP = 14  # the template landmark whose move `mouth_open_mm` is
 VIEW_TILTS_DEG = (0.0, 30.0, 60.0)  # a frontal scanner's views: straight on, and 8 round at each other tilt
 VIEW_SPACING_MM = 0.4  # their rays' spacing
 IRIS_DEG, PUPIL_DEG = 32.0, 13.0  # an eyeball's iris and pupil: within these angles of straight ahead (+z)

@@ -7,6 +7,7 @@ from ..align.nonrigid import Registration
 from ..draft import MIN_DRAFT_DEG
 from ..export import stl_bytes, threemf_bytes
 from ..evaluate.fit import FitParams
+from ..evaluate.states import AWAKE
 from ..evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
 from ..pipeline import Design
 from ..scan import Scan
@@ -64,6 +65,24 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
     }
 
 
+STATE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region", "seal_force_n", "rim_covered_fraction", "lifted_off")
+
+
+def states_record(fits: dict, states: tuple, cpap_cmh2o: float) -> list[dict]:
+    """fit.json's `states`: awake (the `fits`) and each `StateFit`, every cushion's leak, window,
+    peak pressure and where, at the awake headgear force (`cpap_cmh2o`: the awake pressure)."""
+    rows = [(AWAKE, fits, "")] + [(s.state, s.fits, s.error) for s in states]
+    return [_state_row(state, by_cushion, error, cpap_cmh2o) for state, by_cushion, error in rows]
+
+
+def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
+    """One state's row of fit.json's `states`."""
+    row = {"name": state.name, "parameters": state.parameters(cpap_cmh2o)}
+    if error:
+        return row | {"error": error}
+    return row | {name: {k: v for k, v in fit.summary().items() if k in STATE_KEYS} for name, fit in fits.items()}
+
+
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}."""
     reg = d.registration
@@ -90,6 +109,10 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
                      "recommended headgear force it presses evenly",
         },
         **evaluation_record(d.fits, d.fit_params),
+        "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
+        "states_about": "the face asleep (`cpapfit.evaluate.states`): the jaw dropped (the ICT model's jawOpen carried onto this "
+                        "face), the mask pushed across its axis or rolled by a pillow, the CPAP range's ends; every state at "
+                        "the awake headgear force",
         "parameters": dict(vars(d.cushion.params)),
     }
     return {

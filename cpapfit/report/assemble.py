@@ -12,6 +12,7 @@ from matplotlib import colormaps
 from .. import __version__
 from ..align.nonrigid import Registration
 from ..contact import Contact
+from ..evaluate.fit import CushionFit
 from ..pipeline import Alignment, Design
 from ..render import scene_of
 from ..scan import Scan
@@ -41,13 +42,30 @@ class Provenance:
 def evaluated_rims(d: Design) -> dict:
     """{"custom" | "generic": RimFit} from the design's evaluation: the rim's place on the skin, the gap
     before load (the custom one's without its pre-load, i.e. its shape's fit), pressure and openings."""
-    rims = {}
-    for name, fit in d.fits.items():
-        rim, c = fit.rim, fit.rim.covered
-        clearance = rim.clearance + (d.preload_at(rim.points) if name == "custom" else 0.0)
-        where = np.where(c[:, None], rim.skin, rim.points)
-        rims[name] = RimFit(where, clearance - np.nanmin(clearance[c]), fit.pressure_kpa, np.nan_to_num(fit.opening_mm) > 0)
-    return rims
+    return {name: rim_fit(fit, d.preload_at(fit.rim.points) if name == "custom" else 0.0) for name, fit in d.fits.items()}
+
+
+def rim_fit(fit: CushionFit, preload_mm: np.ndarray | float = 0.0) -> RimFit:
+    """A `CushionFit`'s rim as the pictures show it: on the skin where covered, its gap before load
+    less `preload_mm` (K,) (or one number), pressure and openings."""
+    rim, c = fit.rim, fit.rim.covered
+    clearance = rim.clearance + preload_mm
+    where = np.where(c[:, None], rim.skin, rim.points)
+    return RimFit(where, clearance - np.nanmin(clearance[c]), fit.pressure_kpa, np.nan_to_num(fit.opening_mm) > 0)
+
+
+def state_picture(shot, d: Design, scale: ColourScale) -> Picture:
+    """The custom cushion's rim pressure and openings in each state of the sleeping face, on the awake face."""
+    rims = {"awake": rim_fit(d.fits["custom"])} | {s.state.name: rim_fit(s.fits["custom"]) for s in d.states if not s.error}
+    fits = {"awake": d.fits["custom"]} | {s.state.name: s.fits["custom"] for s in d.states if not s.error}
+    summaries = {n: fit.summary() for n, fit in fits.items()}
+    titles = {n: f"{n}: leak {s['leak_l_min']:.1f} L/min, peak {s['pressure_max_kpa']:.1f} kPa" for n, s in summaries.items()}
+    arrays = {n: (r.points, np.asarray(r.pressure_kpa), np.asarray(r.open, dtype=bool)) for n, r in rims.items()}
+    return Picture("states_pressure.png", "The custom cushion asleep",
+                   "The custom cushion's contact pressure in each state of the sleeping face (mouth open, the mask pushed "
+                   "sideways or rolled by a pillow, the CPAP range's ends), at the headgear force set awake; drawn on the "
+                   "awake face, near-black where the seal opens. The table above gives each state's numbers.",
+                   pic.rim_map_picture(shot, arrays, scale, titles, "Contact pressure along the rim, each state", columns=4))
 
 
 def scan_face(scan: Scan, d: Design) -> Face:
@@ -141,8 +159,9 @@ def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submi
     close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])), scene)
     cushion = Face(d.solid.vertices, d.solid.faces)
     early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close)
-    later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     scale = pressure_scale(rims, window_kpa)
+    later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
+    later.append(state_picture(close, d, scale))
     values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}
     centre = np.mean(d.contact.curve, axis=0)
     fig = viewer_figure(viewer_face(face, centre), cushion,

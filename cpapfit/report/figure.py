@@ -60,13 +60,17 @@ def colour_bar(fig: Figure, ax, scale: ColourScale) -> None:
 
 
 def panels_png(images: list[np.ndarray], titles: list[str], heading: str, scale: ColourScale | None = None,
-               legend: tuple = ()) -> bytes:
-    """PNG of pictures side by side with their titles, a heading, an optional colour bar and a legend
-    [(colour, label)] of line marks."""
+               legend: tuple = (), columns: int | None = None) -> bytes:
+    """PNG of pictures side by side (in rows of `columns`, default all in one row) with their titles,
+    a heading, an optional colour bar and a legend [(colour, label)] of line marks."""
     h, w = images[0].shape[:2]
-    width = len(images) * w / DPI + (1.4 if scale else 0.2)
-    fig = Figure(figsize=(width, h / DPI + 0.9 + (0.35 if legend else 0.0)), dpi=DPI, layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, len(images)))
+    columns = columns or len(images)
+    rows = -(-len(images) // columns)
+    width = columns * w / DPI + (1.4 if scale else 0.2)
+    fig = Figure(figsize=(width, rows * (h / DPI + 0.4) + 0.5 + (0.35 if legend else 0.0)), dpi=DPI, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(rows, columns)).ravel()
+    for ax in axes[len(images):]:
+        ax.set_axis_off()
     for ax, image, title in zip(axes, images, titles):
         ax.imshow(image, interpolation="nearest")
         ax.set_axis_off()

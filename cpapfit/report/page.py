@@ -76,9 +76,12 @@ def lookup(fit: dict, path: str):
     """The value at a dotted path of a nested dict, or None."""
     node = fit
     for part in path.split("."):
-        if not isinstance(node, dict) or part not in node:
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
             return None
-        node = node[part]
     return node
 
 
@@ -105,12 +108,40 @@ def settings_line(fit: dict) -> str:
 
 
 def flatten(record: dict, prefix: str = "") -> list[tuple[str, object]]:
-    """[(dotted path, leaf value)] of a nested dict, in order."""
+    """[(dotted path, leaf value)] of a nested dict, in order; a list of dicts by index."""
     out = []
     for key, value in record.items():
         path = f"{prefix}{key}"
+        if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
+            value = {str(i): v for i, v in enumerate(value)}
         out += flatten(value, path + ".") if isinstance(value, dict) else [(path, value)]
     return out
+
+
+STATE_COLUMNS = (("leak_l_min", "leak"), ("window_fraction", "in window"), ("pressure_max_kpa", "peak"))
+
+
+def states_table(fit: dict) -> str:
+    """Each state of the sleeping face (fit.json's `states`): every cushion's leak, window fraction,
+    peak pressure and where; empty when the record has no states."""
+    states = fit.get("states") or []
+    cushions = [c for c in CUSHIONS if any(c in row for row in states)]
+    if not cushions:
+        return ""
+    head = "".join(f"<th>{c}: {label} ({unit_of(key)[0]})</th>" for c in cushions for key, label in STATE_COLUMNS)
+    body = []
+    for i, row in enumerate(states):
+        if "error" in row:
+            cells = f'<td colspan="{len(cushions) * (len(STATE_COLUMNS) + 1)}">not evaluated: {html.escape(row["error"])}</td>'
+        else:
+            cells = "".join(value_cell(f"states.{i}.{c}.{key}", lookup(fit, f"states.{i}.{c}.{key}")) for c in cushions for key, _ in STATE_COLUMNS)
+            cells += "".join(f"<td>{html.escape(str(row[c]['pressure_max_region']))}</td>" for c in cushions)
+        body.append(f"<tr><th>{html.escape(row['name'])}</th>{cells}</tr>")
+    head += "".join(f"<th>{c}: peak where</th>" for c in cushions)
+    return ("<h2>Asleep: the same cushions in each state of the sleeping face</h2>\n<p>The jaw dropped, the mask pushed "
+            "sideways or rolled by a pillow, and the CPAP range's ends, each at the headgear force set awake. A leak of more "
+            "than a few L/min, or a peak over the window's top, is where a cushion fails the sleeping face.</p>\n"
+            f'<table class="states"><thead><tr><th>state</th>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>')
 
 
 def numbers_table(fit: dict) -> str:
@@ -168,6 +199,7 @@ def report_html(page: Page) -> bytes:
 <h2>At a glance: custom vs generic cushion</h2>
 {settings_line(page.fit)}
 {headline_table(page.fit)}
+{states_table(page.fit)}
 <h2>3-D view</h2>
 <p>Drag to turn, scroll to zoom, hover over a rim for its value. The buttons show the custom cushion or the generic cushion's rim.</p>
 <div id="viewer-box">{page.viewer}</div>

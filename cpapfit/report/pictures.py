@@ -109,14 +109,14 @@ def rim_image(shot: Shot, points: np.ndarray, values: np.ndarray, scale: ColourS
     return loop_image(shot, points, colours)
 
 
-def rim_map_picture(shot: Shot, rims: dict, scale: ColourScale, titles: dict, heading: str) -> bytes:
+def rim_map_picture(shot: Shot, rims: dict, scale: ColourScale, titles: dict, heading: str, columns: int | None = None) -> bytes:
     """PNG: each rim of {name: (points (K, 3) mm, values (K,), open (K,) bool or None)} coloured on the
-    same close-up shot, side by side, with the scale's colour bar."""
+    same close-up shot, side by side (in rows of `columns`), with the scale's colour bar."""
     images = [rim_image(shot, p, v, scale, o) for p, v, o in rims.values()]
     any_open = any(o is not None and o.any() for _, _, o in rims.values())
     any_nan = any(np.isnan(v).any() for _, v, _ in rims.values())
     legend = ((OPEN_RGB / 255, "open: no contact (leak)"),) * any_open + ((NO_DATA_RGB / 255, "no skin found under the rim (hole in the scan)"),) * any_nan
-    return panels_png(images, [titles[n] for n in rims], heading, scale, legend)
+    return panels_png(images, [titles[n] for n in rims], heading, scale, legend, columns)
 
 
 def leak_picture(shot: Shot, rims: dict, titles: dict) -> bytes:

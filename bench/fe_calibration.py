@@ -1,0 +1,97 @@
+"""The finite-element reference and what it says of the fast fit model's springs.
+
+1. Cases with known answers (`cpapfit.evaluate.fe_checks`, fine meshes): plates under pressure, the
+   Hertz cylinder, a confined layer.
+2. The skin: each tissue region of the fit model (`tissue.REGIONS`: E, depth over bone) pressed by a
+   rigid strip as wide as the seal flange (5 mm), plane strain, Poisson 0.49 (`strip_stiffness`),
+   beside the Winkler figure E / h the fast model uses.
+3. The cushion: slices of designed walls (`section_stiffness`), ICT subjects' head meshes from the
+   full model, both masks, SECTIONS slices around each rim; frictionless and bonded to the skin
+   (the two bounds of a flange that grips), beside the fast model's flange spring
+   (`TissueModel.cushion_kpa_per_mm`), and what the two in series give.
+
+Usage: .venv/bin/python bench/fe_calibration.py [--seeds 6] [--first 8000] [--model NPZ | --model shipped]
+"""
+
+import argparse
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cpapfit import __version__
+from cpapfit.errors import CpapfitError
+from cpapfit.evaluate.calibration import section_stiffness, strip_stiffness
+from cpapfit.evaluate.fe_checks import all_checks
+from cpapfit.evaluate.tissue import REGIONS, TissueModel
+from cpapfit.ict import load_ict
+from cpapfit.ict.phantom import ict_head_mesh
+from cpapfit.io import load_scan
+from cpapfit.pipeline import design, place_template
+from cpapfit.template import MASKS
+
+FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
+SECTIONS = 16
+FLANGE_MM = 5.0
+
+
+def profiles(seed: int, source: Path | None) -> dict[str, list[np.ndarray]]:
+    """{mask: SECTIONS (P, 2) mm wall profiles (across the rim, along the axis), seal to frame}."""
+    mesh = ict_head_mesh(seed, model=load_ict(source)).mesh
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "head.ply"
+        path.write_bytes(mesh.export(file_type="ply"))
+        scan = load_scan(path)
+    placed = place_template(scan)
+    out = {}
+    for mask in MASKS:
+        try:
+            cushion = design(scan, mask, placement=placed).cushion
+        except CpapfitError:
+            continue
+        grid, axis = cushion.grid(SECTIONS, 40), cushion.axis
+        centre = grid[:, 0].mean(axis=0)
+        out[mask] = []
+        for wall in grid:
+            outward = wall[0] - centre - ((wall[0] - centre) @ axis) * axis
+            outward /= np.linalg.norm(outward)
+            out[mask].append(np.column_stack([(wall - wall[0]) @ outward, (wall - wall[0]) @ axis]))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=6)
+    ap.add_argument("--first", type=int, default=8000)
+    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped")
+    args = ap.parse_args()
+    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}")
+    t0 = time.perf_counter()
+    print("\n| case | computed | closed form | error |\n|---|---|---|---|")
+    for c in all_checks(fine=True):
+        print(f"| {c.name} | {c.computed:.4f} {c.unit} | {c.expected:.4f} {c.unit} | {100 * c.error:+.2f} % |")
+    print(f"\nskin under a {FLANGE_MM:g} mm strip (Poisson 0.49):\n\n| region | E (kPa) | depth (mm) | Winkler E/h (kPa/mm) "
+          "| finite elements (kPa/mm) | ratio |\n|---|---|---|---|---|---|")
+    for name, (e, h, _) in REGIONS.items():
+        k = strip_stiffness(e, h, FLANGE_MM, cells=48)
+        print(f"| {name} | {e:g} | {h:g} | {e / h:.2f} | {k:.2f} | {k / (e / h):.2f} |")
+    spring = TissueModel().cushion_kpa_per_mm
+    print(f"\ncushion walls, ICT seeds {args.first}-{args.first + args.seeds - 1}, {SECTIONS} slices a rim, 2 mm silicone "
+          f"(E 1 MPa, Poisson 0.49), the fast model's flange spring {spring:g} kPa/mm:\n")
+    print("| mask | slices | frictionless: p10 / median / p90 (kPa/mm) | bonded: p10 / median / p90 (kPa/mm) |\n|---|---|---|---|")
+    walls = {mask: [] for mask in MASKS}
+    for seed in range(args.first, args.first + args.seeds):
+        for mask, profs in profiles(seed, source).items():
+            walls[mask] += [(section_stiffness(p, 2.0, FLANGE_MM), section_stiffness(p, 2.0, FLANGE_MM, bonded=True)) for p in profs]
+    for mask, ks in walls.items():
+        k = np.array(ks)
+        cells = [" / ".join(f"{v:.2f}" for v in np.percentile(k[:, i], [10, 50, 90])) for i in range(2)]
+        print(f"| {mask} | {len(k)} | {cells[0]} | {cells[1]} |")
+    print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""The fast fit model's springs from the finite-element reference (`fe.py`): per unit of contact
+area, how hard the skin and the cushion press back per mm they are pushed.
+
+- The skin: a layer of soft tissue (Young's modulus E, Poisson 0.49, thickness h) bonded to bone,
+  pressed by a rigid flat strip as wide as the seal flange (plane strain: the rim is long beside
+  its width). A Winkler foundation says E / h; a thin, nearly incompressible layer under a strip
+  wider than it is deep is much stiffer (it cannot squeeze out), a deep one under a narrow strip
+  softer at the edges and stiffer in the middle. `strip_stiffness` is the mean pressure over the
+  strip per mm of indentation.
+- The cushion: a slice of its wall across the rim (`cushion_section`: the designed surface's
+  profile from the seal to the frame ring, thickened as the solid is), its frame end held, pressed
+  along the mask axis by the skin as a rigid flat body parallel to the flange. `section_stiffness`
+  is the force per unit rim length per mm of travel over the contact width.
+"""
+
+import numpy as np
+from skfem import MeshTri
+
+from .fe import Material, dofs_where, graded, rigid_contact, solve_section, stiffness
+
+TISSUE_POISSON = 0.49
+SIDE_WIDTHS = 8.0  # the tissue slab reaches this many strip widths (or layer depths) beside the strip
+
+
+def strip_stiffness(youngs_kpa: float, thickness_mm: float, width_mm: float, cells: int = 24,
+                    poisson: float = TISSUE_POISSON) -> float:
+    """kPa/mm: mean pressure under a rigid frictionless strip `width_mm` wide pressed into a tissue layer
+    (E `youngs_kpa`, `poisson`, `thickness_mm` deep, bonded to bone), per mm of indentation. Half the
+    strip by symmetry; `cells` across the layer's depth (and across the half strip)."""
+    half = 0.5 * width_mm
+    side = SIDE_WIDTHS * max(width_mm, thickness_mm)
+    xs = np.unique(np.concatenate([graded(0.0, half, cells, towards=half, ratio=8.0),
+                                   graded(half, half + side, 2 * cells, towards=half, ratio=40.0)]))
+    mesh = MeshTri.init_tensor(xs, graded(0.0, thickness_mm, cells, towards=thickness_mm, ratio=4.0))
+    material = Material(youngs_kpa, poisson)
+    basis = _basis(mesh)
+    fixed = np.concatenate([dofs_where(basis, lambda x: x[1] == 0.0), dofs_where(basis, lambda x: x[0] == 0.0, "u^1")])
+    under = dofs_where(basis, lambda x: (x[1] == thickness_mm) & (x[0] <= half + 1e-9), "u^2")
+    section = solve_section(mesh, material, fixed, (under, -np.ones(len(under))))
+    return float(-section.reaction[under].sum() / half)
+
+
+def cushion_section(profile: np.ndarray, thickness_mm: float, cells_along: int = 80, cells_across: int = 4) -> tuple[MeshTri, MeshTri]:
+    """A plane-strain mesh of a cushion's wall, and the same mesh in (fraction of the way from seal to
+    frame, fraction of the way through the wall) (its dofs number alike). `profile` (P, 2) mm: the
+    face-side surface from the seal (first point) to the frame (last) in (across the rim, along the
+    mask axis away from the face) coordinates; the mesh is turned so the face lies up (y = minus the
+    axial coordinate) and thickened by `thickness_mm` away from the face."""
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(profile, axis=0), axis=1))])
+    param = MeshTri.init_tensor(graded(0.0, 1.0, cells_along, towards=0.0, ratio=4.0), np.linspace(0.0, 1.0, cells_across + 1))
+    along, through = param.p
+    at = along * arc[-1]
+    point = np.column_stack([np.interp(at, arc, profile[:, k]) for k in range(2)])
+    tangent = np.column_stack([np.interp(at, arc, np.gradient(profile[:, k], arc)) for k in range(2)])
+    normal = np.column_stack([tangent[:, 1], -tangent[:, 0]]) / np.linalg.norm(tangent, axis=1, keepdims=True)
+    normal *= np.sign(normal[:, 1].mean())  # away from the face: +axial
+    xy = point + thickness_mm * through[:, None] * normal
+    return MeshTri(np.vstack([xy[:, 0], -xy[:, 1]]), param.t), param
+
+
+def section_stiffness(profile: np.ndarray, thickness_mm: float, contact_mm: float, travel_mm: float = 0.5,
+                      bonded: bool = False, material: Material = Material()) -> float:
+    """kPa/mm: the force per unit rim length that pushes the skin `travel_mm` along the mask axis into
+    a cushion's wall (`profile` (P, 2) mm as for `cushion_section`, its frame end held), per mm of
+    travel and mm of `contact_mm`, the flange width the fast model spreads it over. The skin is a rigid
+    flat body along the flange's first `contact_mm` of profile: frictionless (the flange slides on it,
+    touching where it may), or `bonded` there (the flange's face side over `contact_mm` moves with the
+    skin: no slip, no lift). The two bound a real flange's, which grips the skin."""
+    mesh, param = cushion_section(profile, thickness_mm)
+    on_param = _basis(param)
+    fixed = dofs_where(on_param, lambda x: x[0] == 1.0)
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(profile, axis=0), axis=1))])
+    flange = profile[arc <= contact_mm] * [1.0, -1.0]
+    if np.ptp(flange[:, 0]) < np.ptp(flange[:, 1]):
+        raise ValueError("the flange runs along the mask axis: the skin cannot push it along the axis")
+    slope, level = np.polyfit(flange[:, 0], flange[:, 1], 1)
+    basis = _basis(mesh)
+    if bonded:
+        band = lambda x: (x[1] == 0.0) & (x[0] <= contact_mm / arc[-1] + 1e-9)  # noqa: E731
+        ys, xs = dofs_where(on_param, band, "u^2"), dofs_where(on_param, band, "u^1")
+        section = solve_section(mesh, material, fixed, (np.concatenate([ys, xs]), np.concatenate([np.full(len(ys), -travel_mm), np.zeros(len(xs))])))
+        return float(-section.reaction[ys].sum() / (contact_mm * travel_mm))
+    face = dofs_where(on_param, lambda x: x[1] == 0.0, "u^2")
+    x, y = basis.doflocs[:, face]
+    section = rigid_contact(mesh, material, fixed, face, slope * x + level - y - travel_mm)
+    return float(-section.reaction[face].sum() / (contact_mm * travel_mm))
+
+
+def _basis(mesh: MeshTri):
+    """The quadratic vector basis of a mesh."""
+    return stiffness(mesh, Material())[0]

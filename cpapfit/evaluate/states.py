@@ -1,0 +1,164 @@
+"""The sleeping face: states a cushion designed on the awake face must still seal in.
+
+A mask is worn asleep. The jaw drops (the lower lip a median 13 mm with oronasal masks, 6 mm with
+nasal ones), a pillow pushes the mask sideways and rolls it about its axis, and the CPAP pressure
+runs from 4 to 20 cmH2O. Each `FaceState` is one such state; `state_face` and `moved` make the face
+and the cushion of it, so the evaluation presses a cushion onto every state as onto the awake face,
+at the awake headgear force (the straps are set once, awake).
+
+The jaw: the ICT Face Model's `jawOpen` shape (an expression the model adds to any identity),
+carried onto the template through the template-ICT correspondence (`cpapfit.ict.template_on_ict`),
+smoothed over the template as the morphable basis is, then onto the patient by the linear part of
+the map from the template to its registration (the face's size and pose), and scaled so that the
+lower inner lip (template landmark 14) moves the state's mouth opening. The scan moves with the
+registered template nearest it (inverse-distance weights of its JAW_NEIGHBOURS nearest vertices).
+"""
+
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from ..align.morphable import smooth_fields
+from ..ict import LOWER_INNER_LIP, load_ict, template_truth
+from ..template import load_template
+from ..errors import InputError
+from .fit import CushionFit, Face, FitParams, fit_rim
+from .rim import find_rim, in_plane, refined
+
+JAW_NEIGHBOURS = 4
+MOUTH_OPEN_MM = {"nasal": 6.0, "oronasal": 13.0}  # the median mouth opening asleep with each mask (3DPiPPIn)
+PILLOW_SHIFT_MM, PILLOW_ROLL_DEG = 3.0, 5.0
+CPAP_RANGE_CMH2O = (4.0, 20.0)
+
+
+@dataclass(frozen=True)
+class FaceState:
+    """One state of the face and mask: `mouth_open_mm` the lower inner lip's drop (mm), `shift_mm`
+    the mask moved across its axis towards the patient's left (negative: right), `roll_deg` turned
+    about its axis (degrees, counter-clockwise as seen from in front), `cpap_cmh2o` the pressure
+    (None: the awake evaluation's)."""
+
+    name: str
+    mouth_open_mm: float = 0.0
+    shift_mm: float = 0.0
+    roll_deg: float = 0.0
+    cpap_cmh2o: float | None = None
+
+    def parameters(self, awake_cmh2o: float) -> dict:
+        """The state's parameters as fit.json records them (`awake_cmh2o`: the awake pressure)."""
+        return {"mouth_open_mm": self.mouth_open_mm, "shift_mm": self.shift_mm, "roll_deg": self.roll_deg,
+                "cpap_cmh2o": awake_cmh2o if self.cpap_cmh2o is None else self.cpap_cmh2o}
+
+
+AWAKE = FaceState("awake")
+
+
+def sleep_states(mask: str) -> tuple[FaceState, ...]:
+    """The states a `mask` ("nasal" | "oronasal") cushion is evaluated in besides `AWAKE`: the jaw
+    half and fully dropped, the pillow's shift to either side and roll, the CPAP range's ends."""
+    mouth = MOUTH_OPEN_MM[mask]
+    low, high = CPAP_RANGE_CMH2O
+    return (
+        FaceState(f"mouth open {mouth / 2:g} mm", mouth_open_mm=mouth / 2),
+        FaceState(f"mouth open {mouth:g} mm", mouth_open_mm=mouth),
+        FaceState(f"pillow: mask {PILLOW_SHIFT_MM:g} mm to the left", shift_mm=PILLOW_SHIFT_MM),
+        FaceState(f"pillow: mask {PILLOW_SHIFT_MM:g} mm to the right", shift_mm=-PILLOW_SHIFT_MM),
+        FaceState(f"pillow: mask rolled {PILLOW_ROLL_DEG:g} deg", roll_deg=PILLOW_ROLL_DEG),
+        FaceState(f"CPAP {low:g} cmH2O", cpap_cmh2o=low),
+        FaceState(f"CPAP {high:g} cmH2O", cpap_cmh2o=high),
+    )
+
+
+@lru_cache(maxsize=1)
+def template_jaw() -> np.ndarray:
+    """(N, 3) mm: the ICT `jawOpen` shape at full strength carried onto the template (template frame,
+    template vertex order), smoothed like the morphable basis."""
+    model, template = load_ict(), load_template()
+    field = template_truth(model.expressions[model.expression_names.index("jawOpen")])
+    out = smooth_fields(field[None], template.vertices, template.faces)[0]
+    out.flags.writeable = False
+    return out
+
+
+def jaw_field(registered: np.ndarray) -> np.ndarray:
+    """(N, 3) mm per mm of mouth opening: the jaw's motion on a registered template (N, 3) mm (scan
+    frame), its lower inner lip moving 1 mm."""
+    template = load_template().vertices
+    linear = np.linalg.lstsq(np.hstack([template, np.ones((len(template), 1))]), registered, rcond=None)[0][:3]
+    field = template_jaw() @ linear
+    return field / np.linalg.norm(field[LOWER_INNER_LIP])
+
+
+def state_face(face: Face, jaw: np.ndarray, mouth_open_mm: float) -> Face:
+    """The `face` with the mouth opened `mouth_open_mm` mm along the `jaw_field` (N, 3) of its
+    registered template: the registered template and the scan surface (its vertices moved with the
+    template's nearest) both moved. The face itself when the mouth stays closed."""
+    if mouth_open_mm == 0:
+        return face
+    move = mouth_open_mm * jaw
+    registered = np.asarray(face.registered.vertices)
+    dist, near = cKDTree(registered).query(np.asarray(face.scan.vertices), k=JAW_NEIGHBOURS)
+    weight = 1.0 / np.maximum(dist, 1e-6)
+    scan_move = np.einsum("vk,vkc->vc", weight, move[near]) / weight.sum(axis=1, keepdims=True)
+    return replace(face, scan=_moved_surface(face.scan, scan_move),
+                   registered=trimesh.Trimesh(registered + move, face.registered.faces, process=False))
+
+
+def _moved_surface(surface: trimesh.Trimesh | trimesh.PointCloud, move: np.ndarray):
+    """A copy of a scan surface with its vertices moved by (V, 3) mm."""
+    points = np.asarray(surface.vertices) + move
+    if isinstance(surface, trimesh.PointCloud):
+        return trimesh.PointCloud(points)
+    return trimesh.Trimesh(points, surface.faces, process=False)
+
+
+def moved(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float) -> trimesh.Trimesh:
+    """A copy of a cushion mesh (mm, scan frame) shifted `shift_mm` across the mask axis towards
+    the patient's left and rolled `roll_deg` about the axis through its centre (the pillow's push);
+    the cushion itself when neither."""
+    if shift_mm == 0 and roll_deg == 0:
+        return cushion
+    side = in_plane(face.axis, face.up)[0]
+    turn = trimesh.transformations.rotation_matrix(np.radians(roll_deg), face.axis, cushion.vertices.mean(axis=0))
+    turn[:3, 3] += shift_mm * side
+    out = cushion.copy()
+    out.apply_transform(turn)
+    return out
+
+
+@dataclass(frozen=True)
+class StateFit:
+    """The cushions pressed onto one state: `fits` {"custom" | "generic": CushionFit}, or, where the
+    state cannot be evaluated (its rim over too little scanned skin), `error` says why."""
+
+    state: FaceState
+    fits: dict[str, CushionFit]
+    error: str = ""
+
+
+def fit_states(
+    cushions: dict[str, trimesh.Trimesh], face: Face, states: tuple[FaceState, ...], width_mm: float, force_n: float,
+    params: FitParams = FitParams(),
+) -> tuple[StateFit, ...]:
+    """Every cushion of `cushions` (name -> mesh, mm, scan frame) pressed onto each of `states` of
+    `face` at the awake headgear force `force_n` N; `width_mm` the seal flange width. Each cushion is
+    refined once, and states that differ only in pressure share their contact lines."""
+    jaw = jaw_field(np.asarray(face.registered.vertices))
+    fine = {name: refined(mesh) for name, mesh in cushions.items()}
+    rims, out = {}, []
+    for state in states:
+        state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
+        on = state_face(face, jaw, state.mouth_open_mm)
+        pose = (state.mouth_open_mm, state.shift_mm, state.roll_deg)
+        try:
+            for name, mesh in fine.items():
+                if (name, *pose) not in rims:
+                    rims[(name, *pose)] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up)
+        except InputError as exc:
+            out.append(StateFit(state, {}, str(exc)))
+            continue
+        out.append(StateFit(state, {name: fit_rim(rims[(name, *pose)], on, width_mm, force_n, state_params) for name in fine}))
+    return tuple(out)

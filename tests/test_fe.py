@@ -1,0 +1,52 @@
+"""The finite-element reference against cases with known answers, and the calibration's springs."""
+
+import numpy as np
+import pytest
+
+from cpapfit.evaluate.calibration import section_stiffness, strip_stiffness
+from cpapfit.evaluate.fe import Material
+from cpapfit.evaluate.fe_checks import confined_layer_check, hertz_checks, plate_checks
+
+
+def test_plates_under_pressure_bend_as_plate_theory_says():
+    """Cantilever tip and clamped strip middle within 3 % (shear adds a little to a 20:1 plate)."""
+    for check in plate_checks():
+        assert abs(check.error) < 0.03, check
+
+
+def test_a_rigid_cylinder_pressed_into_a_block_makes_the_hertz_contact():
+    """Half-width within 5 % (the coarse mesh's step is 7 % of it); the elliptic pressure's share inside
+    half the width (0.609) within 0.02."""
+    width, share = hertz_checks()
+    assert abs(width.error) < 0.05, width
+    assert share.computed == pytest.approx(share.expected, abs=0.02)
+
+
+def test_a_wide_strip_on_a_thin_layer_presses_it_as_a_confined_column():
+    check = confined_layer_check()
+    assert abs(check.error) < 0.03, check
+
+
+def test_skin_under_a_flange_is_stiffer_than_a_winkler_layer_says():
+    """A nearly incompressible layer under a 5 mm strip: over the nasal bones (40 kPa, 3 mm) and the
+    cheek (16 kPa, 15 mm) 3-4 times E / h (46.6 and 4.2 kPa/mm, within 3 %)."""
+    assert strip_stiffness(40.0, 3.0, 5.0, cells=12) == pytest.approx(46.6, rel=0.03)
+    assert strip_stiffness(16.0, 15.0, 5.0, cells=12) == pytest.approx(4.2, rel=0.03)
+
+
+def test_a_cushion_wall_grips_harder_than_it_slides_and_scales_with_its_silicone():
+    """An arched wall (flange across the axis, then rising 25 mm): bonded to the skin it is stiffer than
+    sliding on it; twice the modulus, twice the stiffness (linear elasticity)."""
+    turn = np.linspace(0.0, np.pi / 2, 20)
+    profile = np.vstack([np.column_stack([np.linspace(0.0, 5.0, 10), np.zeros(10)]),
+                         np.column_stack([5.0 + 4.0 * np.sin(turn[1:]), 4.0 - 4.0 * np.cos(turn[1:])]),
+                         np.column_stack([np.full(20, 9.0), np.linspace(4.5, 25.0, 20)])])
+    sliding, bonded = section_stiffness(profile, 2.0, 5.0), section_stiffness(profile, 2.0, 5.0, bonded=True)
+    assert 0.0 < sliding < bonded
+    stiffer = section_stiffness(profile, 2.0, 5.0, bonded=True, material=Material(2 * Material().youngs_kpa))
+    assert stiffer == pytest.approx(2.0 * bonded, rel=1e-6)
+
+
+def test_a_flange_along_the_axis_cannot_be_pressed_along_it():
+    with pytest.raises(ValueError, match="along the mask axis"):
+        section_stiffness(np.column_stack([np.zeros(20), np.linspace(0.0, 20.0, 20)]), 2.0, 5.0)

@@ -1,0 +1,91 @@
+"""The sleeping face: the jaw carried onto a face, the pillow's push, every state pressed."""
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from cpapfit.evaluate.fit import Face
+from cpapfit.evaluate.states import FaceState, fit_states, jaw_field, moved, sleep_states, state_face
+from cpapfit.ict import LOWER_INNER_LIP, template_truth
+from cpapfit.ict.phantom import random_subject
+from cpapfit.pipeline import evaluated_cushions, face_for
+from cpapfit.template import load_template
+
+NOSE_TIP, CHIN = 4, 152
+
+
+def test_the_jaw_drops_the_lower_lip_down_and_back_and_leaves_the_nose():
+    field = jaw_field(load_template().vertices)
+    assert np.linalg.norm(field[LOWER_INNER_LIP]) == pytest.approx(1.0)
+    assert field[LOWER_INNER_LIP, 1] < -0.7 and field[LOWER_INNER_LIP, 2] < -0.3  # down (-y) and back (-z)
+    assert np.linalg.norm(field[NOSE_TIP]) < 0.02
+    assert np.linalg.norm(field[CHIN]) > 0.9
+
+
+def test_the_jaw_turns_and_scales_with_the_face():
+    """A face turned 40 degrees and 1.2 times the template: the same jaw, turned; the lip still moves 1 mm per mm."""
+    turn = Rotation.from_euler("yx", [40.0, -15.0], degrees=True).as_matrix()
+    face = 1.2 * load_template().vertices @ turn.T + [5.0, -3.0, 600.0]
+    field = jaw_field(face)
+    assert np.linalg.norm(field[LOWER_INNER_LIP]) == pytest.approx(1.0)
+    upright = jaw_field(load_template().vertices)
+    assert np.abs(field[[LOWER_INNER_LIP, CHIN]] - upright[[LOWER_INNER_LIP, CHIN]] @ turn.T).max() < 1e-6
+
+
+def test_a_predicted_open_mouth_lies_where_the_model_opens_that_face():
+    """An ICT face (not the template) opened 13 mm by the model's own jawOpen: the jaw carried onto its
+    true template places the oronasal contact band within 0.5 mm (mean), 1.5 mm (largest)."""
+    rng = np.random.default_rng
+    closed, opened = (template_truth(random_subject(rng(5), mouth, None)[0]) for mouth in (0.0, 13.0))
+    band = load_template().regions["oronasal"].band
+    error = np.linalg.norm(closed + 13.0 * jaw_field(closed) - opened, axis=1)[band]
+    assert error.mean() < 0.5 and error.max() < 1.5
+
+
+def test_an_open_mouth_moves_the_scan_with_its_template():
+    template = load_template()
+    scan = trimesh.Trimesh(template.vertices + [0.0, 0.0, 0.3], template.faces, process=False)
+    face = Face(scan, template.mesh(), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    jaw = jaw_field(template.vertices)
+    opened = state_face(face, jaw, 10.0)
+    move = np.asarray(opened.scan.vertices) - np.asarray(scan.vertices)
+    band = template.regions["oronasal"].band  # where a rim lies (between the lips the neighbours mix)
+    assert np.linalg.norm(move - 10.0 * jaw, axis=1)[band].max() < 0.2  # the scan 0.3 mm off its template moves as it does
+    assert state_face(face, jaw, 0.0) is face
+
+
+def test_a_pillow_moves_the_mask_across_its_axis_and_turns_it_about_it():
+    box = trimesh.creation.box((40.0, 50.0, 20.0))
+    face = Face(box, box, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    shifted = moved(box, face, 3.0, 0.0)
+    assert np.allclose(shifted.vertices - box.vertices, [3.0, 0.0, 0.0])  # +x: the patient's left
+    rolled = moved(box, face, 0.0, 90.0)
+    assert np.allclose(rolled.vertices.mean(axis=0), box.vertices.mean(axis=0))
+    assert np.ptp(rolled.vertices, axis=0) == pytest.approx([50.0, 40.0, 20.0])
+
+
+def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, placed_subjects):
+    """The design records each state of its mask, the custom and the generic cushion in each; the
+    custom cushion moved 10 mm sideways leaks over 5 L/min (the model does not seal everything)."""
+    ph, d = designed
+    mask = d.contact.mask
+    assert [s.state for s in d.states] == list(sleep_states(mask)) and not any(s.error for s in d.states)
+    assert all(set(s.fits) == {"custom", "generic"} for s in d.states)
+    assert max(s.state.mouth_open_mm for s in d.states) == {"nasal": 6.0, "oronasal": 13.0}[mask]
+    _, scan, _ = placed_subjects(ph.seed)
+    far = FaceState("10 mm off", shift_mm=10.0)
+    face = face_for(scan, d.alignment, d.registration)
+    fit = fit_states(evaluated_cushions(d.alignment, d.solid, None), face, (far,), d.cushion.params.flange_mm,
+                     d.fits["custom"].force_n, d.fit_params)[0]
+    assert fit.fits["custom"].summary()["leak_l_min"] > 5.0
+
+
+def test_the_design_line_says_in_how_many_states_each_cushion_leaks():
+    from cpapfit.cli import asleep_summary
+
+    row = lambda name, custom, generic: {"name": name, "custom": {"leak_l_min": custom}, "generic": {"leak_l_min": generic}}  # noqa: E731
+    fit = {"states": [row("awake", 0.0, 9.0), row("a", 0.5, 3.0), row("b", 12.0, 1.0), {"name": "c", "error": "no skin"}]}
+    assert asleep_summary(fit) == ("asleep: custom leaks over 2 L/min in 1 of 2 (worst: b, 12.0 L/min); "
+                                   "generic leaks over 2 L/min in 1 of 2 (worst: a, 3.0 L/min)")
+    assert asleep_summary({}) == "asleep: not evaluated"
