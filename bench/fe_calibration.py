@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cpapfit import __version__
+from cpapfit.cushion.nurbs import CushionParams
 from cpapfit.errors import CpapfitError
 from cpapfit.evaluate.calibration import section_stiffness, strip_stiffness
 from cpapfit.evaluate.fe_checks import all_checks
@@ -34,7 +35,7 @@ from cpapfit.template import MASKS
 
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 SECTIONS = 16
-FLANGE_MM = 5.0
+WALL_MM, FLANGE_MM = CushionParams().wall_mm, CushionParams().flange_mm
 
 
 def profiles(seed: int, source: Path | None) -> dict[str, list[np.ndarray]]:
@@ -79,13 +80,13 @@ def main() -> None:
         k = strip_stiffness(e, h, FLANGE_MM, cells=48)
         print(f"| {name} | {e:g} | {h:g} | {e / h:.2f} | {k:.2f} | {k / (e / h):.2f} |")
     spring = TissueModel().cushion_kpa_per_mm
-    print(f"\ncushion walls, ICT seeds {args.first}-{args.first + args.seeds - 1}, {SECTIONS} slices a rim, 2 mm silicone "
+    print(f"\ncushion walls, ICT seeds {args.first}-{args.first + args.seeds - 1}, {SECTIONS} slices a rim, {WALL_MM:g} mm silicone "
           f"(E 1 MPa, Poisson 0.49), the fast model's flange spring {spring:g} kPa/mm:\n")
     print("| mask | slices | frictionless: p10 / median / p90 (kPa/mm) | bonded: p10 / median / p90 (kPa/mm) |\n|---|---|---|---|")
     walls = {mask: [] for mask in MASKS}
     for seed in range(args.first, args.first + args.seeds):
         for mask, profs in profiles(seed, source).items():
-            walls[mask] += [(section_stiffness(p, 2.0, FLANGE_MM), section_stiffness(p, 2.0, FLANGE_MM, bonded=True)) for p in profs]
+            walls[mask] += [(section_stiffness(p, WALL_MM, FLANGE_MM), section_stiffness(p, WALL_MM, FLANGE_MM, bonded=True)) for p in profs]
     for mask, ks in walls.items():
         k = np.array(ks)
         cells = [" / ".join(f"{v:.2f}" for v in np.percentile(k[:, i], [10, 50, 90])) for i in range(2)]

@@ -6,7 +6,8 @@ ways at the design's headgear force:
 - true: the same cushions pressed onto the ICT face itself in that state, its registered template
   the truth (`HeadMesh.truth`), the mouth opened by the model's own jawOpen (`ict_head_mesh(...,
   mouth_open_mm=)`), or by a second, independent jaw model (`--jaw hinge`: the mandible turned about
-  its condyles, `hinged`), the mask moved as the state says.
+  its hinge as the template population's phantoms open it, `cpapfit.phantom.open_mouth`, on the
+  true template's surface), the mask moved as the state says.
 Also the awake truth, and the mask moved 10 mm sideways on the true face (a cushion that far off must
 leak). Per design: every state's leak, window fraction and peak pressure, predicted and true.
 
@@ -30,52 +31,31 @@ from cpapfit import __version__
 from cpapfit.errors import CpapfitError
 from cpapfit.evaluate.fit import face_of, fit_cushion
 from cpapfit.evaluate.states import AWAKE, FaceState, moved, sleep_states
-from cpapfit.ict import LOWER_INNER_LIP, load_ict, template_truth
-from cpapfit.ict.phantom import ict_head_mesh, random_subject, scene
+from cpapfit.ict import load_ict, template_truth
+from cpapfit.ict.phantom import ict_head_mesh, random_subject
+from cpapfit.phantom import open_mouth
 from cpapfit.io import load_scan
 from cpapfit.pipeline import design, evaluated_cushions, place_template
-from cpapfit.template import MASKS
+from cpapfit.template import MASKS, load_template
 
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 FAR = FaceState("mask 10 mm to the left", shift_mm=10.0)
 KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region")
-CONDYLE_BELOW_NOSE_MM, CONDYLE_BEHIND_MM = 10.0, 85.0  # the condyles' axis: below the nose base, behind it (left-right)
-LIP_RAMP_MM, CHEEK_RAMP_MM = 3.0, 25.0  # the jaw's share ramps from 0 to 1 over this far below the mouth line
-
-
-def hinged(face: np.ndarray, model, mouth_open_mm: float) -> np.ndarray:
-    """(V, 3) mm: an ICT face (template frame) with its mandible turned about the condyles' left-right
-    axis so that the lower inner lip drops `mouth_open_mm`; the skin follows the jaw by a share that
-    ramps from 0 at the mouth line (the stomion's height) to 1 over LIP_RAMP_MM between the mouth
-    corners, CHEEK_RAMP_MM beyond them (the cheeks stretch)."""
-    marks = face[model.landmarks]
-    corners, stomion = marks[[48, 54]], marks[[62, 66]].mean(axis=0)
-    pivot = marks[33] + [0.0, -CONDYLE_BELOW_NOSE_MM, -CONDYLE_BEHIND_MM]
-    half = 0.5 * abs(corners[1, 0] - corners[0, 0])
-    beyond = np.clip((np.abs(face[:, 0] - stomion[0]) - half) / 15.0, 0.0, 1.0)
-    ramp = LIP_RAMP_MM + beyond * (CHEEK_RAMP_MM - LIP_RAMP_MM)
-    share = np.clip((stomion[1] - face[:, 1]) / ramp, 0.0, 1.0)
-    share = share * share * (3 - 2 * share)
-    lip = template_truth(face)[LOWER_INNER_LIP]
-    angle = 2 * np.arcsin(mouth_open_mm / (2 * np.linalg.norm((lip - pivot)[1:])))
-    return _turn_x(face - pivot, share * angle) + pivot
-
-
-def _turn_x(points: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """(V, 3) points turned about the x axis by (V,) angles (radians; positive: the chin goes down and back)."""
-    c, s = np.cos(angle), np.sin(angle)
-    y, z = points[:, 1], points[:, 2]
-    return np.column_stack([points[:, 0], c * y - s * z, s * y + c * z])
 
 
 def head(seed: int, source: Path | None, mouth_open_mm: float, jaw: str):
-    """(surface mesh, true registered template (N, 3)) of subject `seed`, mouth open as asked."""
+    """(surface mesh, true registered template (N, 3)) of subject `seed`, mouth open as asked: the
+    ICT head mesh opened by the model's jawOpen, or (`jaw` "hinge") the true template's surface with
+    the mandible turned about its hinge (`cpapfit.phantom.open_mouth`, the template population's jaw)."""
     model = load_ict(source)
-    if jaw == "ict" or mouth_open_mm == 0:
+    if jaw == "ict":
         h = ict_head_mesh(seed, mouth_open_mm=mouth_open_mm, model=model)
         return h.mesh, h.truth
-    opened = hinged(random_subject(np.random.default_rng(seed), 0.0, model)[0], model, mouth_open_mm)
-    return trimesh.Trimesh(*scene(opened), process=False), template_truth(opened)
+    template = load_template()
+    truth = template_truth(random_subject(np.random.default_rng(seed), 0.0, model)[0])
+    if mouth_open_mm > 0:
+        truth = open_mouth(truth, template, mouth_open_mm)[0]
+    return trimesh.Trimesh(truth, template.faces, process=False), truth
 
 
 def run(job: tuple[int, Path | None, str]) -> list[dict]:
@@ -111,8 +91,12 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str) -> dict:
             surface, truth = head(seed, source, state.mouth_open_mm, jaw)
             faces[state.mouth_open_mm] = face_of(surface, truth, d.cushion.axis, d.cushion.up)
         params = d.fit_params if state.cpap_cmh2o is None else replace(d.fit_params, cpap_cmh2o=state.cpap_cmh2o)
-        true = {n: fit_cushion(moved(m, faces[state.mouth_open_mm], state.shift_mm, state.roll_deg), faces[state.mouth_open_mm],
-                               width, force, params).summary() for n, m in cushions.items()}
+        on = faces[state.mouth_open_mm]
+        try:
+            true = {n: fit_cushion(moved(m, on, state.shift_mm, state.roll_deg), on, width, force, params).summary()
+                    for n, m in cushions.items()}
+        except CpapfitError as exc:
+            return {**row, "outcome": "not evaluated", "reason": f"{state.name}: {exc}"[:200]}
         pred = {n: f.summary() for n, f in predicted.get(state.name, {}).items()}
         states.append({"name": state.name, **{f"{kind}_{n}": {k: s[k] for k in KEYS} for kind, by in (("true", true), ("predicted", pred))
                                                for n, s in by.items()}})

@@ -127,16 +127,15 @@ def fit_summary(fit: dict) -> str:
 
 def state_summary(row: dict) -> str:
     """One line on a state of fit.json's `states`: each cushion's leak and peak pressure."""
-    if "error" in row:
-        return f"{row['name']}: not evaluated ({row['error']})"
     cells = [f"{name} leak {row[name]['leak_l_min']:.1f} L/min, peak {row[name]['pressure_max_kpa']:.2f} kPa"
              for name in ("custom", "generic") if name in row]
+    cells += [f"not evaluated ({row['error']})"] if "error" in row else []
     return f"{row['name']}: {'; '.join(cells)}"
 
 
 def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
     """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`, and its worst."""
-    states = [row for row in fit.get("states", [])[1:] if "error" not in row]
+    states = fit.get("states", [])[1:]
     parts = []
     for name in ("custom", "generic"):
         rows = [row for row in states if name in row]

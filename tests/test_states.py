@@ -5,7 +5,9 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from cpapfit.evaluate.fit import Face
+from cpapfit.cushion.generic import template_cushion
+from cpapfit.cushion.solid import cushion_sheet
+from cpapfit.evaluate.fit import Face, FitParams, fit_cushion
 from cpapfit.evaluate.states import FaceState, fit_states, jaw_field, moved, sleep_states, state_face
 from cpapfit.ict import LOWER_INNER_LIP, template_truth
 from cpapfit.ict.phantom import random_subject
@@ -60,9 +62,27 @@ def test_a_pillow_moves_the_mask_across_its_axis_and_turns_it_about_it():
     face = Face(box, box, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
     shifted = moved(box, face, 3.0, 0.0)
     assert np.allclose(shifted.vertices - box.vertices, [3.0, 0.0, 0.0])  # +x: the patient's left
-    rolled = moved(box, face, 0.0, 90.0)
-    assert np.allclose(rolled.vertices.mean(axis=0), box.vertices.mean(axis=0))
-    assert np.ptp(rolled.vertices, axis=0) == pytest.approx([50.0, 40.0, 20.0])
+    corner = np.flatnonzero((box.vertices[:, 0] > 0) & (box.vertices[:, 1] > 0) & (box.vertices[:, 2] > 0))[0]
+    rolled = moved(box, face, 0.0, 90.0)  # counter-clockwise as seen from in front (+z towards the viewer)
+    assert rolled.vertices[corner] == pytest.approx([-25.0, 20.0, 10.0])
+    shifted_box = trimesh.Trimesh(box.vertices + [7.0, 0.0, 0.0], box.faces, process=False)
+    assert moved(shifted_box, face, 0.0, 90.0).vertices[corner] == pytest.approx([7.0 - 25.0, 20.0, 10.0])  # about its own centre
+
+
+def test_each_state_gives_what_pressing_the_moved_cushion_onto_its_face_gives():
+    """`fit_states` (each cushion refined once, contact lines shared between states) against
+    `fit_cushion` of the moved cushion on the state's face: the same numbers, the roll included."""
+    template = load_template()
+    face = Face(template.mesh(), template.mesh(), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    cushion = cushion_sheet(template_cushion("oronasal"))
+    states = (FaceState("a", mouth_open_mm=8.0, roll_deg=4.0), FaceState("b", shift_mm=-2.0), FaceState("c", roll_deg=4.0, cpap_cmh2o=15.0))
+    got = fit_states({"custom": cushion}, face, states, 5.0, 6.0)
+    jaw = jaw_field(template.vertices)
+    for state, fit in zip(states, got):
+        params = FitParams() if state.cpap_cmh2o is None else FitParams(cpap_cmh2o=state.cpap_cmh2o)
+        on = state_face(face, jaw, state.mouth_open_mm)
+        alone = fit_cushion(moved(cushion, face, state.shift_mm, state.roll_deg), on, 5.0, 6.0, params).summary()
+        assert fit.fits["custom"].summary() == pytest.approx(alone, rel=1e-9, abs=1e-9), state.name
 
 
 def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, placed_subjects):

@@ -1,5 +1,5 @@
-"""The fast fit model's springs from the finite-element reference (`fe.py`): per unit of contact
-area, how hard the skin and the cushion press back per mm they are pushed.
+"""What the fast fit model's springs stand for, measured by the finite-element reference (`fe.py`):
+per unit of contact area, how hard the skin and the cushion press back per mm they are pushed.
 
 - The skin: a layer of soft tissue (Young's modulus E, Poisson 0.49, thickness h) bonded to bone,
   pressed by a rigid flat strip as wide as the seal flange (plane strain: the rim is long beside
@@ -16,7 +16,7 @@ area, how hard the skin and the cushion press back per mm they are pushed.
 import numpy as np
 from skfem import MeshTri
 
-from .fe import Material, dofs_where, graded, rigid_contact, solve_section, stiffness
+from .fe import Material, dofs_where, graded, rigid_contact, solve_section, vector_basis
 
 TISSUE_POISSON = 0.49
 SIDE_WIDTHS = 8.0  # the tissue slab reaches this many strip widths (or layer depths) beside the strip
@@ -33,7 +33,7 @@ def strip_stiffness(youngs_kpa: float, thickness_mm: float, width_mm: float, cel
                                    graded(half, half + side, 2 * cells, towards=half, ratio=40.0)]))
     mesh = MeshTri.init_tensor(xs, graded(0.0, thickness_mm, cells, towards=thickness_mm, ratio=4.0))
     material = Material(youngs_kpa, poisson)
-    basis = _basis(mesh)
+    basis = vector_basis(mesh)
     fixed = np.concatenate([dofs_where(basis, lambda x: x[1] == 0.0), dofs_where(basis, lambda x: x[0] == 0.0, "u^1")])
     under = dofs_where(basis, lambda x: (x[1] == thickness_mm) & (x[0] <= half + 1e-9), "u^2")
     section = solve_section(mesh, material, fixed, (under, -np.ones(len(under))))
@@ -60,32 +60,32 @@ def cushion_section(profile: np.ndarray, thickness_mm: float, cells_along: int =
 
 def section_stiffness(profile: np.ndarray, thickness_mm: float, contact_mm: float, travel_mm: float = 0.5,
                       bonded: bool = False, material: Material = Material()) -> float:
-    """kPa/mm: the force per unit rim length that pushes the skin `travel_mm` along the mask axis into
-    a cushion's wall (`profile` (P, 2) mm as for `cushion_section`, its frame end held), per mm of
-    travel and mm of `contact_mm`, the flange width the fast model spreads it over. The skin is a rigid
-    flat body along the flange's first `contact_mm` of profile: frictionless (the flange slides on it,
-    touching where it may), or `bonded` there (the flange's face side over `contact_mm` moves with the
-    skin: no slip, no lift). The two bound a real flange's, which grips the skin."""
+    """kPa/mm: the force along the mask axis per unit rim length that pushes the skin `travel_mm`
+    along the axis into a cushion's wall (`profile` (P, 2) mm as for `cushion_section`, its frame
+    end held), per mm of travel and mm of `contact_mm`, the flange width the fast model spreads it
+    over. The skin is a rigid flat body along the flange's first `contact_mm` of profile: frictionless
+    (the flange slides on it, touching where it may; the section is turned so the body lies level,
+    its push along the axis an approach of travel x cos(tilt) along its normal, whose force has the
+    part cos(tilt) along the axis), or `bonded` there (the flange's face side over `contact_mm` moves
+    with the skin: no slip, no lift). The two bound a real flange's, which grips the skin."""
     mesh, param = cushion_section(profile, thickness_mm)
-    on_param = _basis(param)
+    on_param = vector_basis(param)
     fixed = dofs_where(on_param, lambda x: x[0] == 1.0)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(profile, axis=0), axis=1))])
     flange = profile[arc <= contact_mm] * [1.0, -1.0]
     if np.ptp(flange[:, 0]) < np.ptp(flange[:, 1]):
         raise ValueError("the flange runs along the mask axis: the skin cannot push it along the axis")
     slope, level = np.polyfit(flange[:, 0], flange[:, 1], 1)
-    basis = _basis(mesh)
     if bonded:
         band = lambda x: (x[1] == 0.0) & (x[0] <= contact_mm / arc[-1] + 1e-9)  # noqa: E731
         ys, xs = dofs_where(on_param, band, "u^2"), dofs_where(on_param, band, "u^1")
         section = solve_section(mesh, material, fixed, (np.concatenate([ys, xs]), np.concatenate([np.full(len(ys), -travel_mm), np.zeros(len(xs))])))
         return float(-section.reaction[ys].sum() / (contact_mm * travel_mm))
-    face = dofs_where(on_param, lambda x: x[1] == 0.0, "u^2")
-    x, y = basis.doflocs[:, face]
-    section = rigid_contact(mesh, material, fixed, face, slope * x + level - y - travel_mm)
-    return float(-section.reaction[face].sum() / (contact_mm * travel_mm))
-
-
-def _basis(mesh: MeshTri):
-    """The quadratic vector basis of a mesh."""
-    return stiffness(mesh, Material())[0]
+    tilt = np.arctan(slope)
+    level_turn = np.array([[np.cos(tilt), np.sin(tilt)], [-np.sin(tilt), np.cos(tilt)]])  # turns the skin line level
+    turned = MeshTri(level_turn @ mesh.p, mesh.t)
+    face = np.setdiff1d(dofs_where(on_param, lambda x: x[1] == 0.0, "u^2"), fixed)
+    y = vector_basis(turned).doflocs[1, face]
+    approach = travel_mm * np.cos(tilt)
+    section = rigid_contact(turned, material, fixed, face, level * np.cos(tilt) - y - approach)
+    return float(-section.reaction[face].sum() * np.cos(tilt) / (contact_mm * travel_mm))

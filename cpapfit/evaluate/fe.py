@@ -1,7 +1,7 @@
 """The finite-element reference (scikit-fem): linear elasticity in plane strain on quadratic
-triangles, with frictionless contact against a rigid body by an active set. The fast fit model
-(`mechanics.py`, `tissue.py`) is calibrated against it, and it is checked on cases with known
-answers (`bench/fe_validation.py`).
+triangles, with frictionless contact against a rigid body. It is checked on cases with known
+answers (`fe_checks.py`), and measures what the fast fit model's springs (`mechanics.py`,
+`tissue.py`) stand for (`calibration.py`; both run by `bench/fe_calibration.py`).
 
 Units: mm, kPa (so forces per unit depth come out in kPa mm = mN/mm, and energy densities in kPa).
 A section is a plane-strain slice of unit depth: what a long straight piece of wall or skin does.
@@ -60,9 +60,14 @@ def graded(lo: float, hi: float, n: int, towards: float | None = None, ratio: fl
     return x
 
 
+def vector_basis(mesh: MeshTri) -> Basis:
+    """The quadratic vector basis of a 2-D mesh (its dofs number alike on any mesh of the same triangles)."""
+    return Basis(mesh, ElementVector(ElementTriP2()))
+
+
 def stiffness(mesh: MeshTri, material: Material):
     """(basis, K): the quadratic vector basis of a 2-D mesh (mm) and its plane-strain stiffness matrix."""
-    basis = Basis(mesh, ElementVector(ElementTriP2()))
+    basis = vector_basis(mesh)
     return basis, asm(linear_elasticity(*lame_parameters(material.youngs_kpa, material.poisson)), basis)
 
 
@@ -89,8 +94,9 @@ def solve_section(mesh: MeshTri, material: Material, fixed: np.ndarray, moved: t
 
 
 def dofs_where(basis: Basis, where, component: str | None = None) -> np.ndarray:
-    """The dofs at points (nodes and edge midpoints) where `where((2, P) mm) -> (P,) bool` holds: of
-    one displacement component ("u^1": x, "u^2": y) or of both (None)."""
+    """The dofs of the boundary facets whose midpoints satisfy `where((2, P) mm) -> (P,) bool`, with
+    their end nodes (scikit-fem's `get_dofs`), of one displacement component ("u^1": x, "u^2": y)
+    or of both (None)."""
     dofs = basis.get_dofs(where)
     return dofs.all(component) if component else dofs.all()
 
@@ -106,6 +112,8 @@ def rigid_contact(mesh: MeshTri, material: Material, fixed: np.ndarray, surface:
     basis, k = stiffness(mesh, material)
     surface, gap = np.asarray(surface), np.asarray(gap_mm, dtype=float)
     free = np.setdiff1d(np.arange(basis.N), fixed)
+    if not np.isin(surface, free).all():
+        raise ValueError("a contact dof is also held fixed")
     solve_free = splu(k.tocsc()[free][:, free]).solve
     where = np.searchsorted(free, surface)
     unit = np.zeros((len(free), len(surface)))

@@ -117,12 +117,13 @@ def _moved_surface(surface: trimesh.Trimesh | trimesh.PointCloud, move: np.ndarr
 
 def moved(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float) -> trimesh.Trimesh:
     """A copy of a cushion mesh (mm, scan frame) shifted `shift_mm` across the mask axis towards
-    the patient's left and rolled `roll_deg` about the axis through its centre (the pillow's push);
-    the cushion itself when neither."""
+    the patient's left and rolled `roll_deg` about the axis through the centre of its bounding box
+    (the pillow's push; the same centre however finely the mesh is divided); the cushion itself
+    when neither."""
     if shift_mm == 0 and roll_deg == 0:
         return cushion
     side = in_plane(face.axis, face.up)[0]
-    turn = trimesh.transformations.rotation_matrix(np.radians(roll_deg), face.axis, cushion.vertices.mean(axis=0))
+    turn = trimesh.transformations.rotation_matrix(np.radians(roll_deg), face.axis, cushion.bounds.mean(axis=0))
     turn[:3, 3] += shift_mm * side
     out = cushion.copy()
     out.apply_transform(turn)
@@ -131,8 +132,8 @@ def moved(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float
 
 @dataclass(frozen=True)
 class StateFit:
-    """The cushions pressed onto one state: `fits` {"custom" | "generic": CushionFit}, or, where the
-    state cannot be evaluated (its rim over too little scanned skin), `error` says why."""
+    """The cushions pressed onto one state: `fits` {"custom" | "generic": CushionFit} of those that
+    could be, and for any that could not (its rim over too little scanned skin) `error` says why."""
 
     state: FaceState
     fits: dict[str, CushionFit]
@@ -145,20 +146,23 @@ def fit_states(
 ) -> tuple[StateFit, ...]:
     """Every cushion of `cushions` (name -> mesh, mm, scan frame) pressed onto each of `states` of
     `face` at the awake headgear force `force_n` N; `width_mm` the seal flange width. Each cushion is
-    refined once, and states that differ only in pressure share their contact lines."""
+    refined once, and states that differ only in pressure share their contact lines: the numbers
+    are `fit_cushion`'s of the moved cushion on the state's face."""
     jaw = jaw_field(np.asarray(face.registered.vertices))
     fine = {name: refined(mesh) for name, mesh in cushions.items()}
     rims, out = {}, []
     for state in states:
         state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
         on = state_face(face, jaw, state.mouth_open_mm)
-        pose = (state.mouth_open_mm, state.shift_mm, state.roll_deg)
-        try:
-            for name, mesh in fine.items():
-                if (name, *pose) not in rims:
-                    rims[(name, *pose)] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up)
-        except InputError as exc:
-            out.append(StateFit(state, {}, str(exc)))
-            continue
-        out.append(StateFit(state, {name: fit_rim(rims[(name, *pose)], on, width_mm, force_n, state_params) for name in fine}))
+        fits, errors = {}, []
+        for name, mesh in fine.items():
+            key = (name, state.mouth_open_mm, state.shift_mm, state.roll_deg)
+            try:
+                if key not in rims:
+                    rims[key] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up)
+            except InputError as exc:
+                errors.append(f"{name}: {exc}")
+                continue
+            fits[name] = fit_rim(rims[key], on, width_mm, force_n, state_params)
+        out.append(StateFit(state, fits, "; ".join(errors)))
     return tuple(out)

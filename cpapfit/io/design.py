@@ -78,9 +78,8 @@ def states_record(fits: dict, states: tuple, cpap_cmh2o: float) -> list[dict]:
 def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
     """One state's row of fit.json's `states`."""
     row = {"name": state.name, "parameters": state.parameters(cpap_cmh2o)}
-    if error:
-        return row | {"error": error}
-    return row | {name: {k: v for k, v in fit.summary().items() if k in STATE_KEYS} for name, fit in fits.items()}
+    row |= {name: {k: v for k, v in fit.summary().items() if k in STATE_KEYS} for name, fit in fits.items()}
+    return row | ({"error": error} if error else {})
 
 
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:

@@ -56,8 +56,8 @@ def rim_fit(fit: CushionFit, preload_mm: np.ndarray | float = 0.0) -> RimFit:
 
 def state_picture(shot, d: Design, scale: ColourScale) -> Picture:
     """The custom cushion's rim pressure and openings in each state of the sleeping face, on the awake face."""
-    rims = {"awake": rim_fit(d.fits["custom"])} | {s.state.name: rim_fit(s.fits["custom"]) for s in d.states if not s.error}
-    fits = {"awake": d.fits["custom"]} | {s.state.name: s.fits["custom"] for s in d.states if not s.error}
+    fits = {"awake": d.fits["custom"]} | {s.state.name: s.fits["custom"] for s in d.states if "custom" in s.fits}
+    rims = {n: rim_fit(fit) for n, fit in fits.items()}
     summaries = {n: fit.summary() for n, fit in fits.items()}
     titles = {n: f"{n}: leak {s['leak_l_min']:.1f} L/min, peak {s['pressure_max_kpa']:.1f} kPa" for n, s in summaries.items()}
     arrays = {n: (r.points, np.asarray(r.pressure_kpa), np.asarray(r.open, dtype=bool)) for n, r in rims.items()}

@@ -121,6 +121,14 @@ def flatten(record: dict, prefix: str = "") -> list[tuple[str, object]]:
 STATE_COLUMNS = (("leak_l_min", "leak"), ("window_fraction", "in window"), ("pressure_max_kpa", "peak"))
 
 
+def _peak_where(fit: dict | None) -> str:
+    """Where a cushion's peak pressure is in a state, that the CPAP load lifted it off the face, or
+    a dash where it was not evaluated."""
+    if fit is None:
+        return "—"
+    return "lifted off: the CPAP load beats the straps" if fit["lifted_off"] else str(fit["pressure_max_region"])
+
+
 def states_table(fit: dict) -> str:
     """Each state of the sleeping face (fit.json's `states`): every cushion's leak, window fraction,
     peak pressure and where; empty when the record has no states."""
@@ -131,12 +139,10 @@ def states_table(fit: dict) -> str:
     head = "".join(f"<th>{c}: {label} ({unit_of(key)[0]})</th>" for c in cushions for key, label in STATE_COLUMNS)
     body = []
     for i, row in enumerate(states):
-        if "error" in row:
-            cells = f'<td colspan="{len(cushions) * (len(STATE_COLUMNS) + 1)}">not evaluated: {html.escape(row["error"])}</td>'
-        else:
-            cells = "".join(value_cell(f"states.{i}.{c}.{key}", lookup(fit, f"states.{i}.{c}.{key}")) for c in cushions for key, _ in STATE_COLUMNS)
-            cells += "".join(f"<td>{html.escape(str(row[c]['pressure_max_region']))}</td>" for c in cushions)
-        body.append(f"<tr><th>{html.escape(row['name'])}</th>{cells}</tr>")
+        cells = "".join(value_cell(f"states.{i}.{c}.{key}", lookup(fit, f"states.{i}.{c}.{key}")) for c in cushions for key, _ in STATE_COLUMNS)
+        cells += "".join(f"<td>{html.escape(_peak_where(row.get(c)))}</td>" for c in cushions)
+        note = f"<br><small>not evaluated: {html.escape(row['error'])}</small>" if "error" in row else ""
+        body.append(f"<tr><th>{html.escape(row['name'])}{note}</th>{cells}</tr>")
     head += "".join(f"<th>{c}: peak where</th>" for c in cushions)
     return ("<h2>Asleep: the same cushions in each state of the sleeping face</h2>\n<p>The jaw dropped, the mask pushed "
             "sideways or rolled by a pillow, and the CPAP range's ends, each at the headgear force set awake. A leak of more "
