@@ -179,7 +179,7 @@ def cmd_evaluate(args) -> int:
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
     if args.states:
-        states = fit_states(cushions, face, sleep_states(args.mask), CushionParams().flange_mm, fits["custom"].force_n, params)
+        states = fit_states(cushions, face, sleep_states(args.mask), CushionParams().flange_mm, fits["custom"].force_n, params, fits)
         record["states"] = states_record(fits, states, params.cpap_cmh2o)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")

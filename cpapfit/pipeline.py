@@ -219,7 +219,7 @@ def design(
     moulding = submit(checked_mould, cushion, solid)
     cushions = evaluated_cushions(al, solid, mask, params)
     fits = evaluate(face, cushions, params, fit_params)
-    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params)
+    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
     moulded = moulding.result()
     return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload,
                   moulded.parts, moulded.draft, fits, fit_params, states)

@@ -142,15 +142,17 @@ class StateFit:
 
 def fit_states(
     cushions: dict[str, trimesh.Trimesh], face: Face, states: tuple[FaceState, ...], width_mm: float, force_n: float,
-    params: FitParams = FitParams(),
+    params: FitParams = FitParams(), awake: dict[str, CushionFit] | None = None,
 ) -> tuple[StateFit, ...]:
     """Every cushion of `cushions` (name -> mesh, mm, scan frame) pressed onto each of `states` of
     `face` at the awake headgear force `force_n` N; `width_mm` the seal flange width. Each cushion is
-    refined once, and states that differ only in pressure share their contact lines: the numbers
-    are `fit_cushion`'s of the moved cushion on the state's face."""
+    refined once, and states that differ only in pressure share their contact lines, those of the
+    `awake` fits of the same cushions on this face where given: the numbers are `fit_cushion`'s of
+    the moved cushion on the state's face."""
     jaw = jaw_field(np.asarray(face.registered.vertices))
     fine = {name: refined(mesh) for name, mesh in cushions.items()}
-    rims, out = {}, []
+    rims = {(name, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
+    out = []
     for state in states:
         state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
         on = state_face(face, jaw, state.mouth_open_mm)
