@@ -104,7 +104,8 @@ def design_summary(fit: dict) -> str:
            f"median {rim['rim_gap_median_mm']:.2f} mm, max {rim['rim_gap_max_mm']:.2f} mm")
     return (
         f"{fit['mask']} cushion {dims['width_mm']:.0f} wide x {dims['height_mm']:.0f} high x {dims['depth_mm']:.0f} deep mm, "
-        f"watertight, thinnest wall {dims['min_wall_mm']:.2f} mm, rim-to-skin gap before pre-load {gap}"
+        f"watertight, thinnest wall {dims['min_wall_mm']:.2f} mm, membrane {dims['membrane_min_mm']:.2f} mm, "
+        f"rim-to-skin gap before pre-load {gap}"
     )
 
 

@@ -23,10 +23,21 @@ class SolidError(CpapfitError):
         self.found = found or {}
 
 
+def to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
+    """A trimesh solid as a manifold3d Manifold (float32 vertices)."""
+    return manifold3d.Manifold(manifold3d.Mesh(vert_properties=mesh.vertices.astype(np.float32), tri_verts=mesh.faces.astype(np.uint32)))
+
+
+def to_trimesh(m: manifold3d.Manifold) -> trimesh.Trimesh:
+    """A manifold3d Manifold as a trimesh solid."""
+    mesh = m.to_mesh()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
+
+
 def check_closed(mesh: trimesh.Trimesh, name: str) -> dict:
     """A part must be watertight, consistently wound, a valid manifold (manifold3d), of positive
     volume and free of self-intersections. Returns the measured values; raises SolidError otherwise."""
-    m = manifold3d.Manifold(manifold3d.Mesh(vert_properties=mesh.vertices.astype(np.float32), tri_verts=mesh.faces.astype(np.uint32)))
+    m = to_manifold(mesh)
     found = {
         "watertight": bool(mesh.is_watertight), "winding_consistent": bool(mesh.is_winding_consistent),
         "manifold3d": m.status().name, "volume_mm3": float(mesh.volume), "self_intersecting_edges": self_intersecting_edges(mesh),
@@ -37,10 +48,15 @@ def check_closed(mesh: trimesh.Trimesh, name: str) -> dict:
     return found
 
 
-def check_solid(mesh: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name: str) -> dict:
-    """`check_closed`, and the measured thinnest wall `wall_mm` at least WALL_TOLERANCE of `min_wall_mm`."""
+def check_solid(mesh: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name: str, membrane: tuple[float, float] | None = None) -> dict:
+    """`check_closed`, and the measured thinnest wall `wall_mm` at least WALL_TOLERANCE of `min_wall_mm`;
+    `membrane`: (measured thinnest, set thickness) mm of a membrane, held to the same tolerance."""
     found = check_closed(mesh, name) | {"min_wall_mm": float(wall_mm)}
-    if wall_mm < WALL_TOLERANCE * min_wall_mm:
+    thin = wall_mm < WALL_TOLERANCE * min_wall_mm
+    if membrane is not None:
+        found["membrane_min_mm"] = float(membrane[0])
+        thin |= membrane[0] < WALL_TOLERANCE * membrane[1]
+    if thin:
         raise SolidError(f"{name} fails the printability checks ({found}); nothing was written", found)
     return found
 

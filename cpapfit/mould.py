@@ -23,6 +23,7 @@ from trimesh.ray.ray_util import contains_points
 from .cushion.nurbs import Cushion
 from .cushion.solid import sheet_faces
 from .draft import Draft, draft
+from .export import to_manifold, to_trimesh
 
 MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
@@ -38,15 +39,6 @@ class Mould:
 
     parts: dict
     draft: dict
-
-
-def to_manifold(mesh: trimesh.Trimesh) -> m3.Manifold:
-    return m3.Manifold(m3.Mesh(vert_properties=mesh.vertices.astype(np.float32), tri_verts=mesh.faces.astype(np.uint32)))
-
-
-def to_trimesh(m: m3.Manifold) -> trimesh.Trimesh:
-    mesh = m.to_mesh()
-    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
 
 
 def plug(grid: np.ndarray) -> trimesh.Trimesh:

@@ -17,6 +17,7 @@ from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet
 from .cushion.generic import NOSE_TIP, place, template_cushion
 from .compensation import Preload, compensated_cushion
+from .envelope import enveloped_cushion
 from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
 from .evaluate.states import StateFit, fit_states, sleep_states
@@ -214,7 +215,9 @@ def design(
     quality = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape))  # or refuse: rescan
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
-    checks = _checked(solid, wall, params.wall_mm, f"the {mask} cushion", al.landmarks.path)
+    awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
+    cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
+    checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould")
     moulding = submit(checked_mould, cushion, solid)
     cushions = evaluated_cushions(al, solid, mask, params)
@@ -233,11 +236,12 @@ def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):
     return moulded
 
 
-def _checked(solid: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name: str, landmarks_path: str) -> dict:
-    """`check_solid` of a custom cushion; a cushion crossing itself comes from a seal curve that
-    crosses itself, which a well-placed template does not carry: the refusal says what to do."""
+def _checked(solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str, landmarks_path: str) -> dict:
+    """`check_solid` of a custom cushion (`wall`, `membrane`: thinnest measured and set thickness,
+    mm); a cushion crossing itself comes from a seal curve that crosses itself, which a well-placed
+    template does not carry: the refusal says what to do."""
     try:
-        return check_solid(solid, wall_mm, min_wall_mm, name)
+        return check_solid(solid, *wall, name, membrane)
     except SolidError as exc:
         crossings = exc.found.get("self_intersecting_edges", 0)
         if not crossings:

@@ -115,14 +115,20 @@ def test_missing_intrinsics_and_truncated_depth(cli, capture):
     assert_one_line_error(*cli("inspect", capture), "intrinsics.json")
 
 
-def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, monkeypatch):
-    """Demand walls thicker than the design can give: the check refuses, and no file is written."""
+@pytest.mark.parametrize("thicker", ["wall", "membrane"])
+def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, monkeypatch, thicker):
+    """Demand a wall (or membrane) thicker than the design can give: the check refuses, and no file is written."""
     import cpapfit.pipeline as pipeline
     from cpapfit.export import check_solid
 
-    monkeypatch.setattr(pipeline, "check_solid", lambda mesh, wall, _min, name: check_solid(mesh, wall, 2 * wall, name))
+    def demanding(mesh, wall, set_wall, name, membrane):
+        if thicker == "wall":
+            return check_solid(mesh, wall, 2 * wall, name, membrane)
+        return check_solid(mesh, wall, set_wall, name, (membrane[0], 2 * membrane[0]))
+
+    monkeypatch.setattr(pipeline, "check_solid", demanding)
     out = tmp_path / "out"
-    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "printability", "min_wall_mm")
+    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "printability", "membrane_min_mm")
     assert not out.exists() or not any(out.iterdir())
 
 
@@ -197,7 +203,7 @@ def test_an_output_folder_that_is_a_file_is_one_line(cli, tmp_path):
 
 def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
     from cpapfit.cli import design_summary
-    fit = {"mask": "nasal", "cushion": {"width_mm": 52.0, "height_mm": 50.0, "depth_mm": 40.0, "min_wall_mm": 2.01},
+    fit = {"mask": "nasal", "cushion": {"width_mm": 52.0, "height_mm": 50.0, "depth_mm": 40.0, "min_wall_mm": 2.01, "membrane_min_mm": 0.5},
            "fit_before_compression": {"rim_gap_median_mm": None, "rim_gap_max_mm": None, "rim_covered_fraction": 0.0}}
     assert design_summary(fit).endswith("rim-to-skin gap before pre-load no scan data under the rim")
 
@@ -225,4 +231,4 @@ def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, 
     a = trimesh.creation.box((10, 10, 10))
     crossing = trimesh.util.concatenate([a, a.copy().apply_translation((3, 4, 2.5))])  # two boxes through each other
     with pytest.raises(SolidError, match="would cross itself .* give landmarks with --landmarks"):
-        pipeline._checked(crossing, 5.0, 2.0, "the nasal cushion", "render")
+        pipeline._checked(crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")

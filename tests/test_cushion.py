@@ -125,7 +125,8 @@ def test_mould_encloses_exactly_the_cushion(designed):
     """Assembled, the mould halves and core leave a cavity (inside the plug) equal to the cushion,
     and no part reaches into another (points sampled inside each part lie in no other part;
     parts touch along shared faces, where an intersection volume would only measure rounding)."""
-    from cpapfit.mould import plug, to_manifold
+    from cpapfit.export import to_manifold
+    from cpapfit.mould import plug
 
     _, d = designed
     parts = d.mould_parts

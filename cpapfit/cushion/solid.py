@@ -6,7 +6,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
 from ..contact import closed_resample
-from ..export import self_intersecting_edges
+from ..export import self_intersecting_edges, to_manifold, to_trimesh
 from .nurbs import Cushion
 
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
@@ -64,14 +64,18 @@ def cushion_sheet(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Tr
 
 
 def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 24) -> tuple[trimesh.Trimesh, float, int]:
-    """(the printable cushion, its thinnest wall in mm, its self-intersecting edges: 0 unless every
-    smoothing folds). The NURBS surface is sampled and thickened
-    away from the face; where the wall bends, an offset thins it on the inside of the bend, so
-    the offset grows (at most twice) until the thinnest wall reaches the set thickness; where the
-    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
-    grid = cushion.grid(n_u, n_v)
-    hint = closed_resample(skin_normals, n_u)
-    target = cushion.params.wall_mm
+    """(the printable wall, its thinnest wall in mm, its self-intersecting edges: 0 unless every
+    smoothing folds): the NURBS surface sampled and `thickened` away from the face to the set wall."""
+    return thickened(cushion.grid(n_u, n_v), cushion.params.wall_mm, closed_resample(skin_normals, n_u))
+
+
+def thickened(grid: np.ndarray, target: float, hint: np.ndarray) -> tuple[trimesh.Trimesh, float, int]:
+    """(solid, thinnest wall mm, self-intersecting edges) of an (n_u, n_v, 3) sheet thickened to
+    `target` mm away from the face (`hint`: (n_u, 3) skin normals along its v=0 edge). Where the
+    sheet bends, an offset thins it on the inside of the bend, so the offset grows (at most twice)
+    until the thinnest wall reaches the target; where the offset folds into itself, the offset
+    directions are smoothed more (NORMAL_SMOOTHING)."""
+    n_u, n_v, _ = grid.shape
     for smoothing in NORMAL_SMOOTHING:
         offset = target
         for _ in range(3):
@@ -100,3 +104,12 @@ def thinnest_wall(grid: np.ndarray, outer: np.ndarray) -> float:
         inner = trimesh.Trimesh(base, sheet_faces(n_u, n_v), process=False)
         _, walls[suspect], _ = trimesh.proximity.closest_point(inner, outer[suspect])
     return float(walls.min())
+
+
+def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8) -> tuple[trimesh.Trimesh, float]:
+    """(the printable cushion, the membrane's thinnest wall in mm): the cushion's `wall` solid united
+    (manifold3d) with its membrane, the membrane's NURBS sheet `thickened` to `params.membrane_mm`
+    away from the face (`skin_normals`: (K, 3) along the seal curve). Its root lies inside the
+    flange, so the union joins them along the flange's inner edge."""
+    flap, thinnest, _ = thickened(cushion.membrane_grid(n_u, n_v), cushion.params.membrane_mm, closed_resample(skin_normals, n_u))
+    return to_trimesh(to_manifold(wall) + to_manifold(flap)), thinnest

@@ -12,6 +12,7 @@ from ..frozen import freeze_arrays
 from ..template import load_template
 from .leak import leak_l_min
 from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, press
+from .membrane import reach_mm
 from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
 
@@ -53,7 +54,7 @@ class CushionFit:
     """One cushion pressed onto the face at `force_n` N of headgear.
 
     rim: the contact line (K points); stiffness: the tissue under it; pressure_kpa (K,) contact
-    pressure, opening_mm (K,) seal opening, leak_l_min (K,) flow through it (NaN where the rim is
+    pressure, opening_mm (K,) seal opening the membrane (if any) leaves open, leak_l_min (K,) flow through it (NaN where the rim is
     not over scanned skin); pressed: the equilibrium over the covered points; seal_force_n: the
     least headgear force with no opening on the covered rim (None: not below max_force_n);
     contact_width_mm: the seal flange width (the contact band across the rim); window_kpa: the
@@ -96,6 +97,8 @@ class CushionFit:
             "shift_under_load_mm": self.pressed.shift_mm,
             "tilt_deg": np.degrees(np.arctan(self.pressed.tilt)).round(3).tolist(),
             "lifted_off": self.pressed.lifted,
+            "membrane_sealed_fraction": float(((self.pressed.opening_mm > 0) & (self.opening_mm[c] == 0)).mean()),
+            "membrane_width_mm": np.percentile(self.rim.membrane_mm[c], [0, 50, 100]).round(3).tolist(),
         }
 
 
@@ -105,16 +108,28 @@ def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, 
     return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa)
 
 
+def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray:
+    """(covered,) mm of each covered rim point's seal opening that its membrane does not close (none
+    does where the mask is lifted off the face)."""
+    if pressed.lifted:
+        return pressed.opening_mm
+    c = rim.covered
+    return np.maximum(pressed.opening_mm - reach_mm(rim.membrane_mm[c], rim.membrane_thickness_mm[c], cpap_kpa), 0.0)
+
+
 def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
-    """Least headgear force (N) at which no covered rim point opens (bisection), or None."""
+    """Least headgear force (N) at which no covered rim point is left open (bisection), or None."""
+
+    def opened(force: float) -> bool:
+        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa), rim, params.cpap_kpa).max() > 0
+
     lo = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
     hi = params.max_force_n
-    if _press_rim(rim, k, width_mm, hi, params.cpap_kpa).opening_mm.max() > 0:
+    if opened(hi):
         return None
     while hi - lo > tol_n:
         mid = 0.5 * (lo + hi)
-        opened = _press_rim(rim, k, width_mm, mid, params.cpap_kpa).opening_mm.max() > 0
-        lo, hi = (mid, hi) if opened else (lo, mid)
+        lo, hi = (mid, hi) if opened(mid) else (lo, mid)
     return hi
 
 
@@ -159,9 +174,10 @@ def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None,
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
     pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)
     c = rim.covered
-    leak = leak_l_min(pressed.opening_mm, rim.ds[c], width_mm, params.cpap_kpa)
+    opening = _left_open(pressed, rim, params.cpap_kpa)
+    leak = leak_l_min(opening, rim.ds[c], width_mm, params.cpap_kpa)
     sealing = seal_force(rim, k.effective, width_mm, params)
-    full = [_spread(c, a) for a in (pressed.pressure_kpa, pressed.opening_mm, leak)]
+    full = [_spread(c, a) for a in (pressed.pressure_kpa, opening, leak)]
     return CushionFit(rim, k, *full, pressed, force, sealing, width_mm, params.window_kpa)
 
 

@@ -5,7 +5,8 @@ stock cushion) is refined to ~1 mm edges; every vertex looks down the mask axis 
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
 pushed on. Evaluating the written mesh (not the design's internal curve) means `design` and
-`evaluate` measure the same thing.
+`evaluate` measure the same thing. A membrane (`membrane.py`: the mesh thinner than
+MEMBRANE_MAX_MM) is not the rim: it is measured, per sector, for the seal it adds.
 """
 
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..frozen import freeze_arrays
+from .membrane import MEMBRANE_MAX_MM, rim_membrane, thickness_mm
 
 SECTORS = 256
 REFINE_MM = 1.0  # longest cushion edge after refinement
@@ -27,6 +29,7 @@ FACE_MM = 4.0  # scanned skin farther than this behind the registered face along
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
 MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
+MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 
 
 @dataclass(frozen=True)
@@ -37,7 +40,9 @@ class RimContact:
     clearance: (K,) mm from rim to skin along the axis (negative: rim inside the skin; NaN where
     no skin was found, i.e. not covered); cos: (K,) |cos| of the angle between the face's normal
     (the registered template's, smooth where the scan is noisy) and the axis; ds: (K,) mm of rim length each point stands for; uv: (K, 2) mm in-plane position about
-    the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis."""
+    the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
+    membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
+    (0: none)."""
 
     points: np.ndarray
     skin: np.ndarray
@@ -47,6 +52,8 @@ class RimContact:
     uv: np.ndarray
     axis: np.ndarray
     sealed_area_mm2: float
+    membrane_mm: np.ndarray
+    membrane_thickness_mm: np.ndarray
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -66,21 +73,25 @@ def in_plane(axis: np.ndarray, up: np.ndarray) -> np.ndarray:
 
 def find_rim(
     cushion: trimesh.Trimesh, scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray,
-    up: np.ndarray, sectors: int = SECTORS,
+    up: np.ndarray, sectors: int = SECTORS, thickness: np.ndarray | None = None,
 ) -> RimContact:
     """The contact line of a `cushion` mesh over a `scan` surface or point cloud, mm, scan frame. The
     rim is found against `face_mesh` (the registered template: the whole face, no holes), its
     clearance is measured against the scan; where the scan's skin is missing or lies more than
     FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
     of the face counts: the cushion would press on it); InputError if less than
-    MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
-    vertices = refined(cushion).vertices
+    MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up
+    direction; `thickness`: (V,) mm `thickness_mm` of the `refined` cushion, if known."""
+    fine = refined(cushion)
+    vertices = fine.vertices
+    thickness = thickness_mm(fine) if thickness is None else thickness
     on_face, _, face_cos = _look_down(vertices, face_mesh, axis)
     plane = in_plane(axis, up)
     uv = (vertices - vertices.mean(axis=0)) @ plane.T
     sector = np.minimum((np.arctan2(uv[:, 1], uv[:, 0]) + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
     level = np.round(np.nan_to_num(on_face, nan=np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
     order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
+    order = order[thickness[order] > MEMBRANE_MAX_MM]  # the membrane is not the rim
     first = order[np.unique(sector[order], return_index=True)[1]]  # least clearance in each sector
     if len(first) < sectors or not np.isfinite(on_face[first]).all():
         raise InputError("the cushion does not run all the way round the mask axis over the face")
@@ -92,7 +103,8 @@ def find_rim(
         raise InputError(f"only {100 * covered:.0f} % of the cushion's rim lies over scanned skin "
                          f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
-    return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv))
+    membrane = rim_membrane(vertices, thickness, pts, MEMBRANE_SPREAD)
+    return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
 def refined(cushion: trimesh.Trimesh) -> trimesh.Trimesh:

@@ -26,6 +26,7 @@ from ..ict import LOWER_INNER_LIP, load_ict, template_truth
 from ..template import load_template
 from ..errors import InputError
 from .fit import CushionFit, Face, FitParams, fit_rim
+from .membrane import thickness_mm
 from .rim import find_rim, in_plane, refined
 
 JAW_NEIGHBOURS = 4
@@ -151,6 +152,7 @@ def fit_states(
     the moved cushion on the state's face."""
     jaw = jaw_field(np.asarray(face.registered.vertices))
     fine = {name: refined(mesh) for name, mesh in cushions.items()}
+    thick = {name: thickness_mm(mesh) for name, mesh in fine.items()}
     rims = {(name, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
     out = []
     for state in states:
@@ -161,7 +163,8 @@ def fit_states(
             key = (name, state.mouth_open_mm, state.shift_mm, state.roll_deg)
             try:
                 if key not in rims:
-                    rims[key] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up)
+                    rims[key] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis,
+                                         on.up, thickness=thick[name])
             except InputError as exc:
                 errors.append(f"{name}: {exc}")
                 continue

@@ -6,6 +6,8 @@ from .. import __version__
 from ..align.nonrigid import Registration
 from ..draft import MIN_DRAFT_DEG
 from ..export import stl_bytes, threemf_bytes
+from ..evaluate.fe import SILICONE_KPA, SILICONE_POISSON
+from ..evaluate.membrane import BAND_MM, MEMBRANE_MAX_MM
 from ..evaluate.fit import FitParams
 from ..evaluate.states import AWAKE
 from ..evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
@@ -62,6 +64,12 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
                      "(12 mu L), orifice Cd h ds sqrt(2 dP / rho)), L = seal flange width",
             "air_viscosity_pa_s": AIR_VISCOSITY_PA_S, "air_density_kg_m3": AIR_DENSITY_KG_M3, "discharge_coefficient": DISCHARGE_COEFFICIENT,
         },
+        "membrane_model": {
+            "model": "a flap thinner than the wall (found on the cushion mesh by its thickness) closes the seal opening at a rim "
+                     "point up to its reach: the lesser of its width less the sealing band and its cantilever deflection under "
+                     "the CPAP pressure, P w^4 / (8 D), D = E t^3 / (12 (1 - nu^2)); none where the mask lifts off",
+            "band_mm": BAND_MM, "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
+        },
     }
 
 
@@ -111,7 +119,8 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
         "states_about": "the face asleep (`cpapfit.evaluate.states`): the jaw dropped (the ICT model's jawOpen carried onto this "
                         "face), the mask pushed across its axis or rolled by a pillow, the CPAP range's ends; every state at "
-                        "the awake headgear force",
+                        "the awake headgear force; the custom cushion's membrane is sized so that it seals in each "
+                        "(`cpapfit.envelope`)",
         "parameters": dict(vars(d.cushion.params)),
     }
     return {

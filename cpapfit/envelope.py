@@ -1,0 +1,112 @@
+"""Design for the sleeping face: the membrane sized so that the cushion seals in every predicted state.
+
+The wall, with its pressure-compensating pre-load, is pressed onto each state of `sleep_states`
+predicted from the patient's registered template (the jaw dropped, the mask pushed and rolled by a
+pillow, the CPAP range) at the awake headgear force. At each rim point the widest seal opening over
+the states it stays on in (a state that lifts the mask off the face is a matter of headgear force,
+not of the seal), over the WINDOW sectors beside it, grown by MARGIN_MM and MARGIN_SHARE for the
+prediction's doubt, is the reach its membrane needs, within REACH_MM. The membrane's width is the
+narrowest flap of the cushion's membrane thickness that reaches that far at the lowest CPAP
+pressure (`evaluate.membrane.width_for`), and at most INWARD_SHARE of the radius of the seal
+curve's bend inwards there (beside a nostril neighbouring flaps run together). Wherever the
+membrane's sheet still turns back on itself or closes up across the seal (`twisted_columns`),
+those columns narrow by SHRINK, and the whole membrane while its solid would cross itself.
+"""
+
+import numpy as np
+import trimesh
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.spatial import cKDTree
+
+from .contact import Contact, closed_resample
+from .cushion.generic import NOSE_TIP
+from .cushion.nurbs import AROUND, Cushion, design_cushion, inwards
+from .cushion.solid import with_membrane
+from .evaluate.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
+from .evaluate.membrane import width_for
+from .evaluate.rim import SECTORS
+from .export import self_intersecting_edges
+from .evaluate.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
+
+MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
+REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's slack); the widest is a stock full-face flap's
+WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
+INWARD_SHARE = 0.7  # of the seal curve's bend radius: the flap's free edge then runs 0.3 times the length of its root
+BEND_SMOOTHING = 2.0  # samples of the seal curve (Gaussian) smoothed over before its bend is measured
+SHRINK, SHRINKS = 0.75, 6
+CLOSING = 1.0 - INWARD_SHARE  # a sheet row closes up where its step around is under this share of its root's
+
+
+def needed_reach(states: tuple[StateFit, ...], awake: CushionFit) -> np.ndarray:
+    """(SECTORS,) mm: the reach the membrane needs at each rim sector (module docstring)."""
+    widest = np.nan_to_num(awake.opening_mm)
+    for fits in states:
+        fit = fits.fits.get("custom")
+        if fit is not None and not fit.pressed.lifted:
+            widest = np.maximum(widest, np.nan_to_num(fit.opening_mm))
+    widest = maximum_filter1d(widest, size=2 * WINDOW + 1, mode="wrap")
+    return np.clip(widest * (1.0 + MARGIN_SHARE) + MARGIN_MM, *REACH_MM)
+
+
+def membrane_widths(reach: np.ndarray, rim: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
+    """(AROUND,) mm: the membrane's width at each control column of the seal curve for the `reach`
+    (SECTORS,) mm at the awake `rim` points (SECTORS, 3) nearest them, at most INWARD_SHARE of the
+    radius of the seal curve's bend towards its inside anywhere in the column's share of the seal
+    (flaps square to a curve bending inwards meet at its centre of curvature)."""
+    seal = closed_resample(contact.curve, AROUND)
+    need = reach[cKDTree(rim).query(seal)[1]]
+    width = width_for(need, thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)
+    fine = len(contact.curve) // AROUND
+    curve = gaussian_filter1d(contact.curve, BEND_SMOOTHING, axis=0, mode="wrap")  # the bend, not the samples' jitter
+    bend = maximum_filter1d(inward_curvature(curve, contact.normals), size=2 * fine + 1, mode="wrap")
+    return np.minimum(width, INWARD_SHARE / np.maximum(bend[::fine], 1e-9))
+
+
+def inward_curvature(curve: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(K,) 1/mm: how sharply a closed (K, 3) curve on the skin (unit normals (K, 3)) bends towards
+    its inside within the skin (its geodesic curvature, positive bending `inwards`)."""
+    ahead, behind = np.roll(curve, -1, axis=0) - curve, curve - np.roll(curve, 1, axis=0)
+    ds = 0.5 * (np.linalg.norm(ahead, axis=1) + np.linalg.norm(behind, axis=1))
+    return np.einsum("ij,ij->i", ahead - behind, inwards(curve, normals)) / ds**2
+
+
+def enveloped_cushion(
+    contact: Contact, face: Face, warped: np.ndarray, cushion: Cushion, preload_mm: np.ndarray, wall: trimesh.Trimesh,
+    fit_params: FitParams, awake: CushionFit,
+) -> tuple[Cushion, trimesh.Trimesh, float]:
+    """(the cushion with its membrane, its printable solid, the membrane's thinnest wall mm): the
+    `cushion` (its `wall` solid pressed onto the face as `awake`, at the force the states keep)
+    given the membrane the predicted states need; narrowed where its sheet would twist
+    (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
+    SHRINKS times each."""
+    params = cushion.params
+    states = fit_states({"custom": wall}, face, sleep_states(cushion.mask), params.flange_mm, awake.force_n, fit_params,
+                        {"custom": awake})
+    widths = membrane_widths(needed_reach(states, awake), awake.rim.points, contact, params.membrane_mm)
+    for _ in range(SHRINKS + 1):
+        sized = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered)
+        twisted = twisted_columns(sized.membrane_grid())
+        if not twisted.any():
+            break
+        widths = np.where(twisted, SHRINK * widths, widths)
+    for _ in range(SHRINKS + 1):
+        solid, thinnest = with_membrane(sized, wall, contact.normals)
+        if self_intersecting_edges(solid) == 0:
+            break
+        widths = SHRINK * widths
+        sized = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered)
+    return sized, solid, thinnest
+
+
+def twisted_columns(grid: np.ndarray) -> np.ndarray:
+    """(AROUND,) bool: the control columns (and their neighbours, within the cubic's reach) where a
+    membrane's (n_u, n_v, 3) sheet turns back on itself or closes up: a row's step around the seal
+    against its root row's reversed or under CLOSING of it."""
+    step = np.roll(grid, -1, axis=0) - grid  # (n_u, n_v, 3)
+    root = step[:, :1]
+    along = np.einsum("uvc,uvc->uv", step, np.broadcast_to(root, step.shape)) / np.maximum(np.einsum("uvc,uvc->uv", root, root), 1e-12)
+    bad = np.flatnonzero((along[:, 1:] < CLOSING).any(axis=1))
+    columns = np.zeros(AROUND, dtype=bool)
+    for near in (-1, 0, 1, 2):
+        columns[(bad * AROUND // len(grid) + near) % AROUND] = True
+    return columns

@@ -1,0 +1,95 @@
+"""The self-sealing membrane: a thin flap that the CPAP pressure inside the mask lays on the skin.
+
+A stock cushion seals with a membrane, not with its wall: where the wall lifts off the skin (the
+jaw drops, a pillow pushes the mask), the pressure in the mask pushes the flap down onto the skin,
+and the seal holds while the flap reaches. Here a flap of width w (mm, from its root at the wall's
+contact line to its free edge) and thickness t closes a seal opening (normal to the skin) up to its
+reach, the lesser of
+- its geometry: the flap hangs from its root to the skin and must still lie BAND_MM on it to seal
+  (an inextensible flap: w - BAND_MM), and
+- its bending: a cantilever of length w under the CPAP pressure P deflects P w^4 / (8 D), with
+  D = E t^3 / (12 (1 - nu^2)) the plate's bending stiffness (linear plate theory, the same D the
+  finite-element plate check confirms); a flap too stiff for the pressure is not laid down.
+Where the wall is pushed off the face altogether (the CPAP load beats the headgear), nothing holds.
+
+The membrane is found on any cushion mesh by its thickness (`thickness_mm`): faces whose opposite
+side lies within MEMBRANE_MAX_MM inwards and faces back at them (a sheet's two sides, not the cap
+across a wall's end); a designed wall is at least 1.9 mm thick everywhere.
+"""
+
+import numpy as np
+import trimesh
+from scipy.ndimage import grey_opening
+from scipy.spatial import cKDTree
+
+from .fe import SILICONE_KPA, SILICONE_POISSON
+
+BAND_MM = 2.0  # the flap must lie this far along the skin to seal (the flange's lubrication path is 5 mm)
+MEMBRANE_MAX_MM = 1.0  # thinner than this: membrane, not wall
+INSIDE_MM = 1e-3  # rays start this far inside a face, so they do not meet it
+SLAB_MM = 0.6  # a section across the rim takes in the membrane vertices this near its plane (they are <= 1 mm apart)
+TANGENT_STEP = 4  # the rim's direction at a point: towards the point this many further on from the one as far back
+RUN = 17  # a width holds only where it holds over this many rim points running (a grey opening)
+FACING = -0.8  # a sheet's other side: its normal and the face's meet at cos below this
+
+
+def thickness_mm(mesh: trimesh.Trimesh) -> np.ndarray:
+    """(V,) mm: at each vertex of a mesh (and its copies at the same place), the least thickness over its faces: the distance from a
+    face's centre, inwards along its normal, to the mesh where the face met there faces back (cos
+    below FACING); inf where the ray meets nothing, as on a sheet's open side, or meets a face
+    across its path (the cap over a wall's end)."""
+    inward = -mesh.face_normals
+    origins = mesh.triangles_center + INSIDE_MM * inward
+    loc, ray, tri = mesh.ray.intersects_location(origins, inward, multiple_hits=False)
+    opposite = np.einsum("ij,ij->i", mesh.face_normals[tri], mesh.face_normals[ray]) < FACING
+    face = np.full(len(mesh.faces), np.inf)
+    face[ray[opposite]] = np.linalg.norm(loc[opposite] - origins[ray[opposite]], axis=1) + INSIDE_MM
+    corner = np.unique(mesh.vertices, axis=0, return_inverse=True)[1].ravel()  # copies of a vertex are one corner
+    out = np.full(corner.max() + 1, np.inf)
+    np.minimum.at(out, corner[mesh.faces.ravel()], np.repeat(face, 3))
+    return out[corner]
+
+
+def bending_stiffness(thickness: np.ndarray, youngs_kpa: float = SILICONE_KPA, poisson: float = SILICONE_POISSON) -> np.ndarray:
+    """Plate bending stiffness D (kPa mm^3) of silicone sheets `thickness` mm thick."""
+    return youngs_kpa * np.asarray(thickness) ** 3 / (12.0 * (1.0 - poisson**2))
+
+
+def reach_mm(width_mm: np.ndarray, thickness: np.ndarray, cpap_kpa: float) -> np.ndarray:
+    """(K,) mm of seal opening the membrane closes at each rim point: the lesser of its geometric
+    reach (width - BAND_MM) and its deflection under the CPAP pressure as a cantilever (0 where there
+    is no membrane: width 0)."""
+    width = np.asarray(width_mm, dtype=float)
+    stiff = bending_stiffness(np.where(width > 0, thickness, 1.0))
+    return np.where(width > 0, np.minimum(np.maximum(width - BAND_MM, 0.0), cpap_kpa * width**4 / (8.0 * stiff)), 0.0)
+
+
+def width_for(reach: np.ndarray, thickness_mm: float, cpap_kpa: float) -> np.ndarray:
+    """(K,) mm: the narrowest flap `thickness_mm` thick whose `reach_mm` at `cpap_kpa` is `reach` (K,) mm."""
+    bending = (8.0 * bending_stiffness(thickness_mm) * np.asarray(reach) / cpap_kpa) ** 0.25
+    return np.maximum(np.asarray(reach) + BAND_MM, bending)
+
+
+def rim_membrane(vertices: np.ndarray, thickness: np.ndarray, rim: np.ndarray, spread: int) -> tuple[np.ndarray, np.ndarray]:
+    """(width (K,) mm, thickness (K,) mm) of the membrane at each point of a closed (K, 3) `rim`,
+    measured on the cushion's section there: the membrane vertices (of (V, 3) `vertices` with (V,)
+    `thickness` mm) within SLAB_MM of the plane across the rim at the point, among those hanging
+    from the rim within `spread` points of it (nearest to them); the farthest of them from the
+    point is the width, their mean thickness the thickness; then opened (the least over RUN points
+    running, the most of those): a section that cuts a neighbouring flap lengthwise where the rim
+    turns reads a few points too wide, never a whole stretch. Width 0 where the section has none."""
+    thin = np.flatnonzero(thickness <= MEMBRANE_MAX_MM)
+    owner = cKDTree(rim).query(vertices[thin])[1]
+    order = np.argsort(owner, kind="stable")
+    thin, owner = thin[order], owner[order]
+    starts = np.searchsorted(owner, np.arange(len(rim) + 1))
+    tangent = np.roll(rim, -TANGENT_STEP, axis=0) - np.roll(rim, TANGENT_STEP, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    width, mean_t = np.zeros(len(rim)), np.zeros(len(rim))
+    for k in range(len(rim)):
+        near = np.concatenate([thin[starts[j]:starts[j + 1]] for j in (k + np.arange(-spread, spread + 1)) % len(rim)])
+        offset = vertices[near] - rim[k]
+        cut = np.abs(offset @ tangent[k]) <= SLAB_MM
+        if cut.any():
+            width[k], mean_t[k] = np.linalg.norm(offset[cut], axis=1).max(), thickness[near[cut]].mean()
+    return grey_opening(width, size=RUN, mode="wrap"), mean_t

@@ -1,0 +1,75 @@
+"""The self-sealing membrane: its law, its geometry on a designed cushion, and what it seals."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from cpapfit.evaluate.fit import FitParams, fit_rim
+from cpapfit.evaluate.membrane import BAND_MM, bending_stiffness, reach_mm, width_for
+from cpapfit.evaluate.states import FaceState, fit_states
+from cpapfit.pipeline import evaluated_cushions, face_for
+
+P4 = 4 * 0.0980665  # kPa: the lowest CPAP pressure
+
+
+def test_a_flap_reaches_its_width_less_the_band_or_as_far_as_the_pressure_bends_it():
+    """Wide and thin: geometry limits (w - 2 mm). Narrow at 4 cmH2O: the cantilever P w^4 / 8D
+    (0.5 mm silicone, E 1 MPa, nu 0.49: D = 13.71 kPa mm^3; a 4 mm flap bends 0.915 mm). No flap, no reach."""
+    assert bending_stiffness(0.5) == pytest.approx(1000 * 0.125 / (12 * (1 - 0.49**2)))
+    got = reach_mm(np.array([10.0, 4.0, 0.0]), np.array([0.5, 0.5, 0.0]), P4)
+    assert got == pytest.approx([10.0 - BAND_MM, P4 * 4**4 / (8 * 13.7054), 0.0], abs=1e-3)
+    assert got[1] == pytest.approx(0.915, abs=0.002)
+    need = np.array([0.5, 2.0, 5.0, 8.0])
+    widths = width_for(need, 0.5, P4)
+    assert reach_mm(widths, np.full(4, 0.5), P4) == pytest.approx(need, abs=1e-9)  # the narrowest flap that reaches
+    assert reach_mm(widths - 0.05, np.full(4, 0.5), P4).max() < need.max()
+
+
+def test_the_designed_membrane_is_found_on_the_cushion_as_wide_and_thick_as_designed(designed):
+    """The written solid's thin part, measured section by section along its rim as `evaluate` does,
+    against the flap's width designed there (seal curve to free edge): within 0.5 mm in the median,
+    nowhere 1 mm wider (the measure errs short where the rim turns), and 0.5 mm thick."""
+    _, d = designed
+    rim = d.fits["custom"].rim
+    seal, tip = d.cushion.grid(256, 2)[:, 0], d.cushion.membrane_grid(256, 8)[:, -1]
+    near = np.argmin(np.linalg.norm(rim.points[:, None] - seal[None], axis=2), axis=1)
+    error = rim.membrane_mm - np.linalg.norm(tip - seal, axis=1)[near]
+    assert abs(np.median(error)) < 0.5 and error.max() < 1.0
+    assert np.median(rim.membrane_thickness_mm) == pytest.approx(d.cushion.params.membrane_mm, abs=0.05)
+    assert d.checks["membrane_min_mm"] >= 0.95 * d.cushion.params.membrane_mm
+
+
+def test_the_membrane_closes_the_opening_it_reaches_and_leaks_past_it(designed, placed_subjects):
+    """The custom cushion pushed 4 mm sideways: with no membrane its wall opens; a 6 mm flap (reach 4 mm
+    at 10 cmH2O) closes each opening by 4 mm (what is left leaks), and lowers the leak."""
+    ph, d = designed
+    _, scan, _ = placed_subjects(ph.seed)
+    face = face_for(scan, d.alignment, d.registration)
+    pushed = fit_states(evaluated_cushions(d.alignment, d.solid, None), face, (FaceState("pushed", shift_mm=4.0),),
+                        d.cushion.params.flange_mm, d.fits["custom"].force_n, d.fit_params)[0].fits["custom"]
+    rim = pushed.rim
+    bare = fit_rim(replace(rim, membrane_mm=np.zeros(len(rim.points))), face, 5.0, pushed.force_n, FitParams())
+    flap = fit_rim(replace(rim, membrane_mm=np.full(len(rim.points), 6.0), membrane_thickness_mm=np.full(len(rim.points), 0.5)),
+                   face, 5.0, pushed.force_n, FitParams())
+    c = rim.covered
+    assert bare.opening_mm[c].max() > 0.5
+    assert flap.opening_mm[c] == pytest.approx(np.maximum(bare.opening_mm[c] - 4.0, 0.0), abs=1e-9)
+    assert flap.leak_l_min[c].sum() < bare.leak_l_min[c].sum()
+
+
+@pytest.mark.parametrize("turn", [1, -1])
+def test_a_seal_curve_bends_inwards_by_one_over_its_radius_whichever_way_it_runs(turn):
+    """A 20 mm circle on a plane, run either way round: the flaps point at its centre and it bends
+    inwards by 1/20 per mm; a 30 x 20 mm ellipse bends a / b^2 at the ends of its long axis, b / a^2 at those of its short one."""
+    from cpapfit.cushion.nurbs import inwards
+    from cpapfit.envelope import inward_curvature
+
+    angle = turn * np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
+    circle = 20.0 * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(128)])
+    up = np.tile([0.0, 0.0, 1.0], (128, 1))
+    assert inwards(circle, up) == pytest.approx(-circle / 20.0, abs=1e-9)
+    assert inward_curvature(circle, up) == pytest.approx(1 / 20.0, rel=1e-3)
+    ellipse = circle * [1.5, 1.0, 0.0]
+    bend = inward_curvature(ellipse, up)
+    assert bend[0] == pytest.approx(30.0 / 20.0**2, rel=0.01) and bend[32] == pytest.approx(20.0 / 30.0**2, rel=0.01)
