@@ -12,7 +12,7 @@ reach, the lesser of
   finite-element plate check confirms); a flap too stiff for the pressure is not laid down.
 Where the wall is pushed off the face altogether (the CPAP load beats the headgear), nothing holds.
 
-The membrane is found on any cushion mesh by its thickness (`thickness_mm`): faces whose opposite
+The membrane is found on any closed cushion mesh by its thickness (`face_thickness_mm`): faces whose opposite
 side lies within MEMBRANE_MAX_MM inwards and faces back at them (a sheet's two sides, not the cap
 across a wall's end); a designed wall is at least 1.9 mm thick everywhere.
 """
@@ -33,20 +33,25 @@ RUN = 17  # a width holds only where it holds over this many rim points running 
 FACING = -0.8  # a sheet's other side: its normal and the face's meet at cos below this
 
 
-def thickness_mm(mesh: trimesh.Trimesh) -> np.ndarray:
-    """(V,) mm: at each vertex of a mesh (and its copies at the same place), the least thickness over its faces: the distance from a
-    face's centre, inwards along its normal, to the mesh where the face met there faces back (cos
-    below FACING); inf where the ray meets nothing, as on a sheet's open side, or meets a face
-    across its path (the cap over a wall's end)."""
+def face_thickness_mm(mesh: trimesh.Trimesh) -> np.ndarray:
+    """(F,) mm: the thickness at each face of a mesh: the distance from its centre, inwards along its
+    normal, to the mesh where the face met there faces back (cos below FACING); inf where the ray
+    meets nothing, as on a sheet's open side, or meets a face across its path (the cap over a wall's end)."""
     inward = -mesh.face_normals
     origins = mesh.triangles_center + INSIDE_MM * inward
     loc, ray, tri = mesh.ray.intersects_location(origins, inward, multiple_hits=False)
     opposite = np.einsum("ij,ij->i", mesh.face_normals[tri], mesh.face_normals[ray]) < FACING
     face = np.full(len(mesh.faces), np.inf)
     face[ray[opposite]] = np.linalg.norm(loc[opposite] - origins[ray[opposite]], axis=1) + INSIDE_MM
+    return face
+
+
+def vertex_thickness_mm(mesh: trimesh.Trimesh, face_mm: np.ndarray) -> np.ndarray:
+    """(V,) mm: at each vertex of a mesh (and its copies at the same place), the least of the (F,)
+    thicknesses `face_mm` of its faces."""
     corner = np.unique(mesh.vertices, axis=0, return_inverse=True)[1].ravel()  # copies of a vertex are one corner
     out = np.full(corner.max() + 1, np.inf)
-    np.minimum.at(out, corner[mesh.faces.ravel()], np.repeat(face, 3))
+    np.minimum.at(out, corner[mesh.faces.ravel()], np.repeat(face_mm, 3))
     return out[corner]
 
 

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..frozen import freeze_arrays
-from .membrane import MEMBRANE_MAX_MM, rim_membrane, thickness_mm
+from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_thickness_mm
 
 SECTORS = 256
 REFINE_MM = 1.0  # longest cushion edge after refinement
@@ -81,10 +81,9 @@ def find_rim(
     FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
     of the face counts: the cushion would press on it); InputError if less than
     MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up
-    direction; `thickness`: (V,) mm `thickness_mm` of the `refined` cushion, if known."""
-    fine = refined(cushion)
+    direction; `thickness`: given, the cushion is already `refined` and this is its (V,) thickness mm."""
+    fine, thickness = refined(cushion) if thickness is None else (cushion, thickness)
     vertices = fine.vertices
-    thickness = thickness_mm(fine) if thickness is None else thickness
     on_face, _, face_cos = _look_down(vertices, face_mesh, axis)
     plane = in_plane(axis, up)
     uv = (vertices - vertices.mean(axis=0)) @ plane.T
@@ -107,12 +106,17 @@ def find_rim(
     return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
-def refined(cushion: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The cushion mesh with no edge longer than REFINE_MM (a refined mesh is its own refinement)."""
+def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """(the cushion mesh with no edge longer than REFINE_MM (a refined mesh is its own refinement),
+    its (V,) thickness mm: a closed cushion's own faces' `face_thickness_mm`, carried to the faces
+    refined from them; inf on an open sheet)."""
+    face = face_thickness_mm(cushion) if cushion.is_watertight else np.full(len(cushion.faces), np.inf)
     corners = cushion.vertices[cushion.faces]
     if np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max() <= REFINE_MM:
-        return cushion
-    return trimesh.Trimesh(*trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM), process=False)
+        return cushion, vertex_thickness_mm(cushion, face)
+    vertices, faces, source = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM, return_index=True)
+    fine = trimesh.Trimesh(vertices, faces, process=False)
+    return fine, vertex_thickness_mm(fine, face[source])
 
 
 def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:

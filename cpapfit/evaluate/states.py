@@ -26,7 +26,6 @@ from ..ict import LOWER_INNER_LIP, load_ict, template_truth
 from ..template import load_template
 from ..errors import InputError
 from .fit import CushionFit, Face, FitParams, fit_rim
-from .membrane import thickness_mm
 from .rim import find_rim, in_plane, refined
 
 JAW_NEIGHBOURS = 4
@@ -151,20 +150,19 @@ def fit_states(
     `awake` fits of the same cushions on this face where given: the numbers are `fit_cushion`'s of
     the moved cushion on the state's face."""
     jaw = jaw_field(np.asarray(face.registered.vertices))
-    fine = {name: refined(mesh) for name, mesh in cushions.items()}
-    thick = {name: thickness_mm(mesh) for name, mesh in fine.items()}
+    fine = {name: refined(mesh) for name, mesh in cushions.items()}  # name -> (mesh, thickness)
     rims = {(name, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
     out = []
     for state in states:
         state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
         on = state_face(face, jaw, state.mouth_open_mm)
         fits, errors = {}, []
-        for name, mesh in fine.items():
+        for name, (mesh, thickness) in fine.items():
             key = (name, state.mouth_open_mm, state.shift_mm, state.roll_deg)
             try:
                 if key not in rims:
                     rims[key] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis,
-                                         on.up, thickness=thick[name])
+                                         on.up, thickness=thickness)
             except InputError as exc:
                 errors.append(f"{name}: {exc}")
                 continue
