@@ -175,7 +175,7 @@ def _membrane_rows(rim: np.ndarray, out: np.ndarray, normals: np.ndarray, width:
     tangent = np.cross(towards, normals)
     on, step = rim, width[:, None] / (MEMBRANE_ROWS - 1)
     for row in range(1, MEMBRANE_ROWS):
-        ahead, _, tri = trimesh.proximity.closest_point(skin, on + step * _unit(towards))
+        ahead, _, tri = trimesh.proximity.closest_point(skin, on + step * trimesh.util.unitize(towards))
         up = skin.face_normals[tri] * np.sign(np.einsum("ij,ij->i", skin.face_normals[tri], normals))[:, None]
         towards = ahead - on
         towards -= np.einsum("ij,ij->i", towards, tangent)[:, None] * tangent
@@ -188,14 +188,9 @@ def inwards(loop: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """(K, 3) unit directions square to a closed (K, 3) `loop` on the skin, along the skin (unit
     `normals` (K, 3)), towards its inside: one side of the loop everywhere, the side its centre is on
     overall (not point by point: where the skin faces sideways the centre lies along the normal)."""
-    tangent = _unit(np.roll(loop, -1, axis=0) - np.roll(loop, 1, axis=0))
-    side = _unit(np.cross(normals, tangent))
+    tangent = trimesh.util.unitize(np.roll(loop, -1, axis=0) - np.roll(loop, 1, axis=0))
+    side = trimesh.util.unitize(np.cross(normals, tangent))
     return side * np.sign(np.einsum("ij,ij->", side, loop.mean(axis=0) - loop))
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    """(N, 3) unit vectors along (N, 3) `v`."""
-    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-9)
 
 
 def _outward(rim: np.ndarray, centre: np.ndarray, normals: np.ndarray, axis: np.ndarray) -> np.ndarray:
