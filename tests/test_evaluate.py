@@ -218,6 +218,22 @@ def test_a_rim_over_no_scanned_skin_is_refused_in_words():
         find_rim(ring, elsewhere, plane, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
 
 
+@pytest.mark.parametrize("inside_out", [False, True])
+def test_a_rim_under_an_overhang_is_measured_to_the_skin_below_it_not_to_the_overhang(inside_out):
+    """Skin: the top of a slab (z = 0) with a ledge standing 6-10 mm over half of it (the wing of a
+    nose over the groove beside it). Under the ledge, a rim point 2 mm above the skin reads +2 mm and
+    one pressed 1.5 mm into it -1.5 mm (not 8 and 11.5 mm inside the ledge); the same with every
+    triangle wound inside out."""
+    slab = trimesh.creation.box((80, 80, 10)).apply_translation((0, 0, -5))
+    ledge = trimesh.creation.box((40, 80, 4)).apply_translation((-20, 0, 8))
+    skin = trimesh.util.concatenate([slab, ledge])
+    if inside_out:
+        skin = trimesh.Trimesh(skin.vertices, skin.faces[:, ::-1], process=False)
+    points = np.array([[-15.0, 0.0, 2.0], [-15.0, 10.0, -1.5], [15.0, 0.0, 2.0], [15.0, 10.0, -1.5]])
+    clearance, _ = _skin_below(points, skin, np.array([0.0, 0.0, 1.0]))
+    assert clearance == pytest.approx([2.0, -1.5, 2.0, -1.5], abs=1e-6)
+
+
 def test_one_stray_triangle_of_a_scan_does_not_lift_the_skin_under_the_rim():
     """A flat scan on a 0.5 mm grid with one vertex under the rim pulled 3 mm out (a torn edge's
     spike): the rim's clearance there is still the ring's height (the median under the flange)."""

@@ -21,7 +21,7 @@ from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_t
 
 SECTORS = 256
 REFINE_MM = 1.0  # longest cushion edge after refinement
-REACH_MM = 60.0  # rays start this far above each vertex, so rims pressed into the skin are found too
+REACH_MM = 60.0  # rays look this far up (rims pressed into the skin) and down the axis for the skin
 CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
 CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
 TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's rim point
@@ -136,19 +136,38 @@ def spacing(tree: cKDTree, sample: int = 2000) -> float:
 
 
 def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray, reach: float = REACH_MM):
-    """(clearance (V,) mm along the axis to the mesh, NaN where none; hit points (V, 3); |cos| of
-    the mesh normal to the axis (V,)). axis: one unit (3,) direction, or (V, 3), one per vertex; rays
-    start `reach` mm above the vertices."""
+    """(clearance (V,) mm along the axis to the skin under each vertex (`_height_over`), NaN where
+    none; the skin's points (V, 3); |cos| of its normal to the axis (V,)). axis: one unit (3,)
+    direction, or (V, 3), one per vertex."""
     axes = np.broadcast_to(axis, vertices.shape)
-    origins = vertices + reach * axes
-    loc, ray, tri = mesh.ray.intersects_location(origins, -axes, multiple_hits=False)
-    clearance = np.full(len(vertices), np.nan)
-    clearance[ray] = np.linalg.norm(loc - origins[ray], axis=1) - reach
-    hits = np.full((len(vertices), 3), np.nan)
-    hits[ray] = loc
-    cos = np.ones(len(vertices))
-    cos[ray] = np.abs(np.einsum("ij,ij->i", mesh.face_normals[tri], axes[ray]))
-    return clearance, hits, cos
+    clearance, cos = _height_over(vertices, mesh, axes, reach)
+    return clearance, vertices - clearance[:, None] * axes, np.where(np.isfinite(clearance), np.abs(cos), 1.0)
+
+
+def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float):
+    """(height (V,) mm each of (V, 3) points lies above the skin along its unit axis (V, 3), NaN where
+    no skin within `reach`; that skin's normal . axis (V,)). Inside the skin (the first surface up
+    its axis faces out, up the axis) the height is minus the depth to it; else it is the height over
+    the first surface below. A point in the air under an overhang (the wing of the nose over the
+    groove beside it) is over the groove, not inside the wing. Out is the side most hits face (a
+    mesh wound inside out reads the same)."""
+    up, up_facing = _first_hit(points, mesh, axes, reach)
+    down, down_facing = _first_hit(points, mesh, -axes, reach)
+    out = np.concatenate([up_facing[np.isfinite(up)], -down_facing[np.isfinite(down)]])
+    out = 1.0 if not len(out) or np.median(out) >= 0 else -1.0
+    inside = np.isfinite(up) & (out * up_facing > 0)
+    return np.where(inside, -up, down), np.where(inside, up_facing, -down_facing)
+
+
+def _first_hit(points: np.ndarray, mesh: trimesh.Trimesh, directions: np.ndarray, reach: float):
+    """(distance (V,) mm to the first surface along each unit direction (V, 3), NaN where none
+    within `reach`; that surface's normal . direction (V,))."""
+    loc, ray, tri = mesh.ray.intersects_location(points, directions, multiple_hits=False)
+    distance, facing = np.full(len(points), np.nan), np.zeros(len(points))
+    near = np.linalg.norm(loc - points[ray], axis=1) <= reach
+    distance[ray[near]] = np.linalg.norm(loc[near] - points[ray[near]], axis=1)
+    facing[ray] = np.einsum("ij,ij->i", mesh.face_normals[tri], directions[ray])
+    return distance, facing
 
 
 def across(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -168,7 +187,7 @@ def skin_under(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reac
     turn = np.linspace(0.0, 2 * np.pi, PROBE_RAYS, endpoint=False)[:, None, None]
     ring = PROBE_MM * (np.cos(turn) * side + np.sin(turn) * other)
     probes = points[None] + np.vstack([np.zeros((1,) + points.shape), ring])
-    heights = _look_down(probes.reshape(-1, 3), mesh, np.tile(axes, (len(probes), 1)), reach)[0].reshape(len(probes), -1)
+    heights = _height_over(probes.reshape(-1, 3), mesh, np.tile(axes, (len(probes), 1)), reach)[0].reshape(len(probes), -1)
     clearance = np.full(len(points), np.nan)
     hit = np.isfinite(heights[0])
     clearance[hit] = np.nanmedian(heights[:, hit], axis=0)
