@@ -7,20 +7,21 @@ the states it stays on in (a state that lifts the mask off the face is a matter 
 not of the seal), over the WINDOW sectors beside it, grown by MARGIN_MM and MARGIN_SHARE for the
 prediction's doubt, is the reach its membrane needs, within REACH_MM. The membrane's width is the
 narrowest flap of the cushion's membrane thickness that reaches that far at the lowest CPAP
-pressure (`evaluate.membrane.width_for`), and at most INWARD_SHARE of the radius of the seal
-curve's bend inwards there (beside a nostril neighbouring flaps run together). Wherever the
+pressure (`evaluate.membrane.width_for`), and at most INWARD_SHARE of the width at which it and its
+neighbours would meet (where the seal curve bends tightly inwards, beside a nostril, the flaps
+fan out across the bend, `flap_directions`, but still run together). Wherever the
 membrane's sheet still turns back on itself or closes up across the seal (`twisted_columns`),
 those columns narrow by SHRINK, and the whole membrane while its solid would cross itself.
 """
 
 import numpy as np
 import trimesh
-from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.ndimage import maximum_filter1d
 from scipy.spatial import cKDTree
 
 from .contact import Contact, closed_resample
 from .cushion.generic import NOSE_TIP
-from .cushion.nurbs import AROUND, Cushion, design_cushion, inwards
+from .cushion.nurbs import AROUND, Cushion, design_cushion, flap_directions
 from .cushion.solid import with_membrane
 from .evaluate.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
 from .evaluate.membrane import width_for
@@ -31,8 +32,7 @@ from .evaluate.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_state
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
 REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's slack); the widest is a stock full-face flap's
 WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
-INWARD_SHARE = 0.7  # of the seal curve's bend radius: the flap's free edge then runs 0.3 times the length of its root
-BEND_SMOOTHING = 2.0  # samples of the seal curve (Gaussian) smoothed over before its bend is measured
+INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
 SHRINK, SHRINKS = 0.75, 6
 CLOSING = 1.0 - INWARD_SHARE  # a sheet row closes up where its step around is under this share of its root's
 
@@ -51,23 +51,23 @@ def needed_reach(states: tuple[StateFit, ...], awake: CushionFit) -> np.ndarray:
 def membrane_widths(reach: np.ndarray, rim: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
     """(AROUND,) mm: the membrane's width at each control column of the seal curve for the `reach`
     (SECTORS,) mm at the awake `rim` points (SECTORS, 3) nearest them, at most INWARD_SHARE of the
-    radius of the seal curve's bend towards its inside anywhere in the column's share of the seal
-    (flaps square to a curve bending inwards meet at its centre of curvature)."""
+    width at which the column's flap meets either neighbour (`converging`)."""
     seal = closed_resample(contact.curve, AROUND)
+    normals = trimesh.util.unitize(closed_resample(contact.curve, AROUND, contact.normals))
     need = reach[cKDTree(rim).query(seal)[1]]
     width = width_for(need, thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)
-    fine = len(contact.curve) // AROUND
-    curve = gaussian_filter1d(contact.curve, BEND_SMOOTHING, axis=0, mode="wrap")  # the bend, not the samples' jitter
-    bend = maximum_filter1d(inward_curvature(curve, contact.normals), size=2 * fine + 1, mode="wrap")
-    return np.minimum(width, INWARD_SHARE / np.maximum(bend[::fine], 1e-9))
+    closing = converging(seal, flap_directions(seal, normals))
+    return np.minimum(width, INWARD_SHARE / np.maximum(np.maximum(closing, np.roll(closing, 1)), 1e-9))
 
 
-def inward_curvature(curve: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """(K,) 1/mm: how sharply a closed (K, 3) curve on the skin (unit normals (K, 3)) bends towards
-    its inside within the skin (its geodesic curvature, positive bending `inwards`)."""
-    ahead, behind = np.roll(curve, -1, axis=0) - curve, curve - np.roll(curve, 1, axis=0)
-    ds = 0.5 * (np.linalg.norm(ahead, axis=1) + np.linalg.norm(behind, axis=1))
-    return np.einsum("ij,ij->i", ahead - behind, inwards(curve, normals)) / ds**2
+def converging(roots: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """(K,) 1/mm: how fast each flap and the next close on each other per mm they run, from roots
+    (K, 3) around a closed curve along unit `directions` (K, 3): the shortening of the gap between
+    their free edges per mm of width over the gap between their roots (1/R for flaps pointing at
+    the centre of a circle of radius R; negative where they spread)."""
+    gap = np.roll(roots, -1, axis=0) - roots
+    along = trimesh.util.unitize(gap)
+    return -np.einsum("ij,ij->i", np.roll(directions, -1, axis=0) - directions, along) / np.linalg.norm(gap, axis=1)
 
 
 def enveloped_cushion(

@@ -59,17 +59,33 @@ def test_the_membrane_closes_the_opening_it_reaches_and_leaks_past_it(designed, 
 
 
 @pytest.mark.parametrize("turn", [1, -1])
-def test_a_seal_curve_bends_inwards_by_one_over_its_radius_whichever_way_it_runs(turn):
-    """A 20 mm circle on a plane, run either way round: the flaps point at its centre and it bends
-    inwards by 1/20 per mm; a 30 x 20 mm ellipse bends a / b^2 at the ends of its long axis, b / a^2 at those of its short one."""
-    from cpapfit.cushion.nurbs import inwards
-    from cpapfit.envelope import inward_curvature
+def test_flaps_pointing_at_a_circles_centre_close_by_one_over_its_radius_whichever_way_it_runs(turn):
+    """A 20 mm circle on a plane, run either way round: the flaps point at its centre (fanned or
+    not) and close on each other by 1/20 per mm of width."""
+    from cpapfit.cushion.nurbs import flap_directions, inwards
+    from cpapfit.envelope import converging
 
-    angle = turn * np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
-    circle = 20.0 * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(128)])
-    up = np.tile([0.0, 0.0, 1.0], (128, 1))
+    angle = turn * np.linspace(0.0, 2 * np.pi, 32, endpoint=False)
+    circle = 20.0 * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(32)])
+    up = np.tile([0.0, 0.0, 1.0], (32, 1))
     assert inwards(circle, up) == pytest.approx(-circle / 20.0, abs=1e-9)
-    assert inward_curvature(circle, up) == pytest.approx(1 / 20.0, rel=1e-3)
-    ellipse = circle * [1.5, 1.0, 0.0]
-    bend = inward_curvature(ellipse, up)
-    assert bend[0] == pytest.approx(30.0 / 20.0**2, rel=0.01) and bend[32] == pytest.approx(20.0 / 30.0**2, rel=0.01)
+    assert flap_directions(circle, up) == pytest.approx(-circle / 20.0, abs=1e-9)
+    assert converging(circle, inwards(circle, up)) == pytest.approx(np.full(32, 1 / 20.0), rel=1e-9)
+
+
+def test_flaps_fan_out_across_a_tight_bend():
+    """A 60 x 30 mm rectangle on a plane with corners rounded to 5 mm, 32 points round it: flaps
+    5.4 mm apart square to it close on each other at the corners at least 1/8 per mm of width;
+    fanned, at most 0.6 times as fast, so a flap there may be 1.7 times as wide."""
+    from cpapfit.cushion.nurbs import flap_directions, inwards
+    from cpapfit.contact import closed_resample
+    from cpapfit.envelope import converging
+
+    corner = np.linspace(0.0, np.pi / 2, 16)
+    arcs = [np.column_stack([cx + 5 * np.cos(corner + q * np.pi / 2), cy + 5 * np.sin(corner + q * np.pi / 2)])
+            for q, (cx, cy) in enumerate([(25, 10), (-25, 10), (-25, -10), (25, -10)])]
+    loop = closed_resample(np.column_stack([np.vstack(arcs), np.zeros(64)]), 32)
+    up = np.tile([0.0, 0.0, 1.0], (32, 1))
+    square = converging(loop, inwards(loop, up)).max()
+    assert square >= 1 / 8.0
+    assert converging(loop, flap_directions(loop, up)).max() <= 0.6 * square

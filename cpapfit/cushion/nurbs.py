@@ -32,6 +32,7 @@ FRAME_RING_MM = {"nasal": (48.0, 46.0), "oronasal": (86.0, 98.0)}  # (width, hei
 MEMBRANE_ROWS = 4  # root, two inner rows, free edge: one cubic Bezier across the flap
 MEMBRANE_ROOT_MM = (1.0, 0.15)  # the flap's root inside the flange: outwards along the skin, up off it
 MEMBRANE_LIFT = 0.1  # at rest the free edge stands this share of the flap's width off the skin plane
+FLAP_SMOOTHING = 1.5  # periodic Gaussian (in control columns) on the flaps' directions: fanned, not square, at a tight bend
 
 
 @dataclass(frozen=True)
@@ -171,8 +172,8 @@ def _membrane_rows(rim: np.ndarray, out: np.ndarray, normals: np.ndarray, width:
     the distance come."""
     root_out, root_up = MEMBRANE_ROOT_MM
     rows = [rim + root_out * out + root_up * normals]
-    towards = inwards(rim, normals)
-    tangent = np.cross(towards, normals)
+    towards = flap_directions(rim, normals)
+    tangent = trimesh.util.unitize(np.cross(towards, normals))
     on, step = rim, width[:, None] / (MEMBRANE_ROWS - 1)
     for row in range(1, MEMBRANE_ROWS):
         ahead, _, tri = trimesh.proximity.closest_point(skin, on + step * trimesh.util.unitize(towards))
@@ -182,6 +183,15 @@ def _membrane_rows(rim: np.ndarray, out: np.ndarray, normals: np.ndarray, width:
         on = ahead
         rows.append(on + (root_up + MEMBRANE_LIFT * row * step) * up)
     return np.stack(rows, axis=1)
+
+
+def flap_directions(rim: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(AROUND, 3) unit directions the membrane's flaps leave the (AROUND, 3) seal points in, along
+    the skin (unit `normals` (AROUND, 3)): `inwards`, smoothed around the seal by FLAP_SMOOTHING
+    columns, so that where the seal curve bends tightly inwards the flaps fan out across the bend
+    rather than all pointing at its centre."""
+    towards = gaussian_filter1d(inwards(rim, normals), FLAP_SMOOTHING, axis=0, mode="wrap")
+    return trimesh.util.unitize(towards - np.einsum("ij,ij->i", towards, normals)[:, None] * normals)
 
 
 def inwards(loop: np.ndarray, normals: np.ndarray) -> np.ndarray:
