@@ -84,7 +84,7 @@ def find_rim(
     direction; `thickness`: given, the cushion is already `refined` and this is its (V,) thickness mm."""
     fine, thickness = refined(cushion) if thickness is None else (cushion, thickness)
     vertices = fine.vertices
-    on_face, _, face_cos = _look_down(vertices, face_mesh, axis)
+    on_face, face_cos = _height_over(vertices, face_mesh, np.broadcast_to(axis, vertices.shape), REACH_MM)
     plane = in_plane(axis, up)
     uv = (vertices - vertices.mean(axis=0)) @ plane.T
     sector = np.minimum((np.arctan2(uv[:, 1], uv[:, 0]) + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
@@ -103,7 +103,7 @@ def find_rim(
                          f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     membrane = rim_membrane(vertices, thickness, pts, MEMBRANE_SPREAD)
-    return RimContact(pts, skin, clearance, face_cos[first], _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
+    return RimContact(pts, skin, clearance, np.abs(face_cos[first]), _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
 def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
@@ -133,15 +133,6 @@ def spacing(tree: cKDTree, sample: int = 2000) -> float:
     """Median distance (mm) from a scan point to its nearest neighbour (a deterministic sample)."""
     points = tree.data[:: max(1, len(tree.data) // sample)]
     return float(np.median(tree.query(points, k=2)[0][:, 1]))
-
-
-def _look_down(vertices: np.ndarray, mesh: trimesh.Trimesh, axis: np.ndarray, reach: float = REACH_MM):
-    """(clearance (V,) mm along the axis to the skin under each vertex (`_height_over`), NaN where
-    none; the skin's points (V, 3); |cos| of its normal to the axis (V,)). axis: one unit (3,)
-    direction, or (V, 3), one per vertex."""
-    axes = np.broadcast_to(axis, vertices.shape)
-    clearance, cos = _height_over(vertices, mesh, axes, reach)
-    return clearance, vertices - clearance[:, None] * axes, np.where(np.isfinite(clearance), np.abs(cos), 1.0)
 
 
 def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float):
