@@ -4,7 +4,7 @@
    Hertz cylinder, a confined layer.
 2. The skin: each tissue region of the fit model (`tissue.REGIONS`: E, depth over bone) pressed by a
    rigid strip as wide as the seal flange (5 mm), plane strain, Poisson 0.49 (`strip_stiffness`),
-   beside the Winkler figure E / h the fast model uses.
+   beside the Winkler figure E / h and the spring the fast model ships (the same computation).
 3. The cushion: slices of designed walls (`section_stiffness`), ICT subjects' head meshes from the
    full model, both masks, SECTIONS slices around each rim; frictionless and bonded to the skin
    (the two bounds of a flange that grips), beside the fast model's flange spring
@@ -75,10 +75,10 @@ def main() -> None:
     for c in all_checks(fine=True):
         print(f"| {c.name} | {c.computed:.4f} {c.unit} | {c.expected:.4f} {c.unit} | {100 * c.error:+.2f} % |")
     print(f"\nskin under a {FLANGE_MM:g} mm strip (Poisson 0.49):\n\n| region | E (kPa) | depth (mm) | Winkler E/h (kPa/mm) "
-          "| finite elements (kPa/mm) | ratio |\n|---|---|---|---|---|---|")
-    for name, (e, h, _) in REGIONS.items():
+          "| finite elements (kPa/mm) | ratio | fit model's spring (kPa/mm) |\n|---|---|---|---|---|---|---|")
+    for name, (e, h, shipped, _) in REGIONS.items():
         k = strip_stiffness(e, h, FLANGE_MM, cells=48)
-        print(f"| {name} | {e:g} | {h:g} | {e / h:.2f} | {k:.2f} | {k / (e / h):.2f} |")
+        print(f"| {name} | {e:g} | {h:g} | {e / h:.2f} | {k:.2f} | {k / (e / h):.2f} | {shipped:.2f} |")
     spring = TissueModel().cushion_kpa_per_mm
     print(f"\ncushion walls, ICT seeds {args.first}-{args.first + args.seeds - 1}, {SECTIONS} slices a rim, {WALL_MM:g} mm silicone "
           f"(E 1 MPa, Poisson 0.49), the fast model's flange spring {spring:g} kPa/mm:\n")

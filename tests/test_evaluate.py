@@ -267,6 +267,23 @@ def test_rim_over_a_sloping_point_cloud_measures_the_same_clearance_as_over_its_
     assert over_cloud.clearance == pytest.approx(over_mesh.clearance, abs=0.05)
 
 
+@pytest.mark.parametrize("as_cloud", [False, True])
+def test_the_skins_slope_under_the_rim_is_the_scans_not_the_registered_faces(as_cloud):
+    """The rim's |cos| is the scan's own normal's, averaged under the flange: a scan sloping at 60
+    degrees to the axis, noisy by 0.2 mm, reads cos 0.5 where the registered face over it ripples
+    (1.5 mm high, 5 mm long: its own slope swings between 10 and 75 degrees to the axis)."""
+    grid = np.stack(np.meshgrid(np.arange(-70, 71, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
+    noise = np.random.default_rng(0).normal(0.0, 0.2, len(grid))
+    skin = np.column_stack([grid, np.sqrt(3.0) * grid[:, 0] + noise])  # normal at 60 degrees to z
+    scan = trimesh.PointCloud(skin) if as_cloud else trimesh.Trimesh(skin, Delaunay(grid).simplices)
+    ripple = np.column_stack([grid, np.sqrt(3.0) * grid[:, 0] + 1.5 * np.sin(2 * np.pi * grid[:, 0] / 5.0)])
+    face = trimesh.Trimesh(ripple, Delaunay(grid).simplices)
+    ring = trimesh.creation.annulus(6.0, 10.0, 10).apply_translation((0, 0, 30))
+    rim = find_rim(ring, scan, face, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    assert rim.covered.mean() > 0.9
+    assert rim.cos[rim.covered] == pytest.approx(np.full(rim.covered.sum(), 0.5), abs=0.06)  # 60 +- 4 degrees
+
+
 def test_tissue_over_the_nasal_bones_is_stiffest():
     t = load_template()
     k = stiffness(t.vertices[[6, 205, 152]], t.vertices)  # nasal bridge, cheek, chin

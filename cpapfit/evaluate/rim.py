@@ -30,6 +30,8 @@ PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the p
 PROBE_RAYS = 6
 MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
+NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
+NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
 
 
 @dataclass(frozen=True)
@@ -38,8 +40,9 @@ class RimContact:
 
     points: (K, 3) mm rim points on the cushion; skin: (K, 3) mm skin below each, along -axis;
     clearance: (K,) mm from rim to skin along the axis (negative: rim inside the skin; NaN where
-    no skin was found, i.e. not covered); cos: (K,) |cos| of the angle between the face's normal
-    (the registered template's, smooth where the scan is noisy) and the axis; ds: (K,) mm of rim length each point stands for; uv: (K, 2) mm in-plane position about
+    no skin was found, i.e. not covered); cos: (K,) |cos| of the angle between the skin's normal
+    and the axis (the scan's, averaged over NORMAL_MM around the skin point; the registered
+    template's where the scan has too little there); ds: (K,) mm of rim length each point stands for; uv: (K, 2) mm in-plane position about
     the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
@@ -103,7 +106,9 @@ def find_rim(
                          f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     membrane = rim_membrane(vertices, thickness, pts, MEMBRANE_SPREAD)
-    return RimContact(pts, skin, clearance, np.abs(face_cos[first]), _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
+    cos = _skin_cos(skin, scan, axis)
+    cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
+    return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
 def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
@@ -207,6 +212,30 @@ def _skin_below(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, 
             level = np.linalg.lstsq(design, height[idx], rcond=None)[0][0]
             clearance[i] = points[i] @ axis - np.clip(level, height[idx].min(), height[idx].max())  # no wild extrapolation
     return clearance, points - clearance[:, None] * axis
+
+
+def _skin_cos(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray) -> np.ndarray:
+    """(K,) |cos| between the unit `axis` and the scan's normal over NORMAL_MM around each of (K, 3)
+    skin points (NaN rows allowed): a mesh's vertex normals there that face as the nearest vertex's
+    does, summed (not the underside of a wing of the nose beside the groove under it); a point
+    cloud's least-spread direction of its points there (NaN with fewer than NORMAL_POINTS)."""
+    out = np.full(len(skin), np.nan)
+    found = np.flatnonzero(np.isfinite(skin).all(axis=1))
+    points = np.asarray(scan.vertices)
+    tree = scan.kdtree if isinstance(scan, trimesh.Trimesh) else cKDTree(points)
+    nearest = tree.query(skin[found])[1]
+    for i, near, idx in zip(found, nearest, tree.query_ball_point(skin[found], NORMAL_MM)):
+        if isinstance(scan, trimesh.Trimesh):
+            normals = scan.vertex_normals[[near, *idx]]
+            normal = normals[normals @ normals[0] > 0].sum(axis=0)
+        elif len(idx) >= NORMAL_POINTS:
+            normal = np.linalg.svd(points[idx] - points[idx].mean(axis=0), full_matrices=False)[2][-1]
+        else:
+            continue
+        length = np.linalg.norm(normal)
+        if length > 0:  # not a degenerate patch whose normals cancel
+            out[i] = abs(normal @ axis) / length
+    return out
 
 
 def _arc_lengths(loop: np.ndarray) -> np.ndarray:

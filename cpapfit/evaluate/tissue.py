@@ -1,14 +1,18 @@
-"""The soft-tissue model: an elastic foundation (Winkler) with per-region stiffness, in series
-with the cushion's own compliance.
+"""The soft-tissue model: an elastic foundation with per-region stiffness, in series with the
+cushion's own compliance.
 
 Each facial region is a layer of soft tissue of Young's modulus E (kPa) and thickness h (mm)
-over bone; as a Winkler foundation it presses back p = (E / h) * indentation. E values are the
-literature's indentation figures (cheek ~16, below the cheekbone ~27, chin ~53, cheekbone
-~65 kPa); thicknesses are typical soft-tissue depths over bone. Over the nasal bones the layer
-is only ~3 mm thick, so the bridge is stiff per unit depth: the classic pressure sore.
-Regions are anchored on template landmarks and blended smoothly (Gaussian in the template's
-mm), so any point of the face gets a stiffness. The cushion's seal flange is a spring in series
-(kPa per mm of flange compression, an effective value to be calibrated on a cast cushion).
+bonded to bone; it presses back p = k * indentation, k (kPa/mm) the mean pressure under a rigid
+strip as wide as the seal flange (5 mm) pressed into that layer, computed by the finite-element
+reference (`calibration.strip_stiffness`, plane strain, Poisson 0.49): 3.2-4.0 times the E / h a
+Winkler foundation would say, as a nearly incompressible layer cannot squeeze out from under the
+strip. E values are the literature's indentation figures (cheek ~16, below the cheekbone ~27,
+chin ~53, cheekbone ~65 kPa); thicknesses are typical soft-tissue depths over bone. Over the nasal
+bones the layer is only ~3 mm thick, so the bridge is stiff: the classic pressure sore. Regions
+are anchored on template landmarks and blended smoothly (Gaussian in the template's mm), so any
+point of the face gets a stiffness. The cushion's seal flange is a spring in series (kPa per mm
+of flange compression): the finite-element slices of designed walls bound it between a flange
+sliding on the skin and one gripping it (`bench/RESULTS.md`); 1 kPa/mm lies between.
 """
 
 from dataclasses import dataclass, field
@@ -19,22 +23,24 @@ from scipy.spatial import cKDTree
 from ..frozen import freeze_arrays
 from ..template import load_template
 
-# region: (E kPa, tissue thickness mm, anchor landmarks on the template)
+STRIP_MM = 5.0  # the flange width the layers' stiffness is computed under
+# region: (E kPa, tissue thickness mm, stiffness kPa/mm under a STRIP_MM strip (strip_stiffness,
+# 48 cells across the depth), anchor landmarks on the template)
 REGIONS = {
-    "nasal bridge": (40.0, 3.0, (6, 168, 197, 195, 5)),
-    "side of the nose": (25.0, 8.0, (129, 358, 48, 278)),
-    "upper lip": (20.0, 12.0, (2, 164, 0, 37, 267)),
-    "cheek": (16.0, 15.0, (36, 266, 100, 329, 205, 425)),
-    "below the cheekbone": (27.0, 14.0, (187, 411, 147, 376, 212, 432, 214, 434)),
-    "cheekbone": (65.0, 7.0, (116, 345, 123, 352, 50, 280)),
-    "chin": (53.0, 10.0, (18, 200, 199, 175, 152, 135, 364)),
+    "nasal bridge": (40.0, 3.0, 46.46, (6, 168, 197, 195, 5)),
+    "side of the nose": (25.0, 8.0, 10.29, (129, 358, 48, 278)),
+    "upper lip": (20.0, 12.0, 6.07, (2, 164, 0, 37, 267)),
+    "cheek": (16.0, 15.0, 4.22, (36, 266, 100, 329, 205, 425)),
+    "below the cheekbone": (27.0, 14.0, 7.42, (187, 411, 147, 376, 212, 432, 214, 434)),
+    "cheekbone": (65.0, 7.0, 30.02, (116, 345, 123, 352, 50, 280)),
+    "chin": (53.0, 10.0, 18.31, (18, 200, 199, 175, 152, 135, 364)),
 }
 
 
 @dataclass(frozen=True)
 class TissueModel:
     """Parameters of the tissue and cushion springs (kPa, mm). `regions`: name -> (E kPa,
-    thickness mm, template landmark anchors); `blend_mm`: Gaussian width of the blending between
+    thickness mm, stiffness kPa/mm under the flange, template landmark anchors); `blend_mm`: Gaussian width of the blending between
     anchors; `cushion_kpa_per_mm`: effective stiffness of the seal flange per unit contact area."""
 
     regions: dict = field(default_factory=lambda: dict(REGIONS))
@@ -44,10 +50,11 @@ class TissueModel:
     def describe(self) -> dict:
         """The model as it goes into fit.json."""
         return {
-            "model": "Winkler elastic foundation, k = E / thickness per region, blended between template "
-                     "landmarks, in series with the cushion flange's stiffness",
-            "regions": {name: {"youngs_modulus_kpa": e, "thickness_mm": h, "stiffness_kpa_per_mm": round(e / h, 3)}
-                        for name, (e, h, _) in self.regions.items()},
+            "model": f"elastic foundation per region, k = the stiffness of a layer of E and thickness on bone under a "
+                     f"rigid {STRIP_MM:g} mm strip (finite elements, plane strain, Poisson 0.49), blended between "
+                     "template landmarks, in series with the cushion flange's stiffness",
+            "regions": {name: {"youngs_modulus_kpa": e, "thickness_mm": h, "stiffness_kpa_per_mm": k}
+                        for name, (e, h, k, _) in self.regions.items()},
             "blend_mm": self.blend_mm,
             "cushion_kpa_per_mm": self.cushion_kpa_per_mm,
         }
@@ -73,8 +80,8 @@ def stiffness(points: np.ndarray, warped: np.ndarray, model: TissueModel = Tissu
     _, nearest = cKDTree(warped).query(points)
     where = template.vertices[nearest]  # the points' places on the template face
     names = list(model.regions)
-    log_k = np.log([e / h for e, h, _ in model.regions.values()])
-    weight = np.stack([_closeness(where, template.vertices[list(model.regions[n][2])], model.blend_mm) for n in names], axis=1)
+    log_k = np.log([k for _, _, k, _ in model.regions.values()])
+    weight = np.stack([_closeness(where, template.vertices[list(model.regions[n][3])], model.blend_mm) for n in names], axis=1)
     tissue = np.exp((weight * log_k).sum(axis=1) / weight.sum(axis=1))
     effective = 1.0 / (1.0 / tissue + 1.0 / model.cushion_kpa_per_mm)
     return Stiffness(tissue, effective, tuple(names[i] for i in weight.argmax(axis=1)))
