@@ -42,8 +42,8 @@ class RimContact:
     clearance: (K,) mm from rim to skin along the axis (negative: rim inside the skin; NaN where
     no skin was found, i.e. not covered); cos: (K,) |cos| of the angle between the skin's normal
     and the axis (the scan's, averaged over NORMAL_MM around the skin point; the registered
-    template's where the scan has too little there); ds: (K,) mm of rim length each point stands for; uv: (K, 2) mm in-plane position about
-    the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
+    template's where the scan has too little there); ds: (K,) mm of rim length each point stands
+    for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
 

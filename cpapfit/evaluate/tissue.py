@@ -40,8 +40,9 @@ REGIONS = {
 @dataclass(frozen=True)
 class TissueModel:
     """Parameters of the tissue and cushion springs (kPa, mm). `regions`: name -> (E kPa,
-    thickness mm, stiffness kPa/mm under the flange, template landmark anchors); `blend_mm`: Gaussian width of the blending between
-    anchors; `cushion_kpa_per_mm`: effective stiffness of the seal flange per unit contact area."""
+    thickness mm, stiffness kPa/mm under the flange, template landmark anchors); `blend_mm`:
+    Gaussian width of the blending between anchors; `cushion_kpa_per_mm`: effective stiffness of
+    the seal flange per unit contact area."""
 
     regions: dict = field(default_factory=lambda: dict(REGIONS))
     blend_mm: float = 8.0
