@@ -16,6 +16,7 @@ sliding on the skin and one gripping it (`bench/RESULTS.md`); 1 kPa/mm lies betw
 """
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -24,23 +25,33 @@ from ..frozen import freeze_arrays
 from ..template import load_template
 
 STRIP_MM = 5.0  # the flange width the layers' stiffness is computed under
-# region: (E kPa, tissue thickness mm, stiffness kPa/mm under a STRIP_MM strip (strip_stiffness,
-# 48 cells across the depth), anchor landmarks on the template)
+
+
+class Region(NamedTuple):
+    """A facial region's tissue: E (kPa), depth over bone (mm), its layer's stiffness (kPa/mm) under
+    a STRIP_MM strip (`calibration.strip_stiffness`, 48 cells across the depth), and the template
+    landmarks it is anchored on."""
+
+    youngs_kpa: float
+    depth_mm: float
+    stiffness_kpa_per_mm: float
+    anchors: tuple
+
+
 REGIONS = {
-    "nasal bridge": (40.0, 3.0, 46.46, (6, 168, 197, 195, 5)),
-    "side of the nose": (25.0, 8.0, 10.29, (129, 358, 48, 278)),
-    "upper lip": (20.0, 12.0, 6.07, (2, 164, 0, 37, 267)),
-    "cheek": (16.0, 15.0, 4.22, (36, 266, 100, 329, 205, 425)),
-    "below the cheekbone": (27.0, 14.0, 7.42, (187, 411, 147, 376, 212, 432, 214, 434)),
-    "cheekbone": (65.0, 7.0, 30.02, (116, 345, 123, 352, 50, 280)),
-    "chin": (53.0, 10.0, 18.31, (18, 200, 199, 175, 152, 135, 364)),
+    "nasal bridge": Region(40.0, 3.0, 46.46, (6, 168, 197, 195, 5)),
+    "side of the nose": Region(25.0, 8.0, 10.29, (129, 358, 48, 278)),
+    "upper lip": Region(20.0, 12.0, 6.07, (2, 164, 0, 37, 267)),
+    "cheek": Region(16.0, 15.0, 4.22, (36, 266, 100, 329, 205, 425)),
+    "below the cheekbone": Region(27.0, 14.0, 7.42, (187, 411, 147, 376, 212, 432, 214, 434)),
+    "cheekbone": Region(65.0, 7.0, 30.02, (116, 345, 123, 352, 50, 280)),
+    "chin": Region(53.0, 10.0, 18.31, (18, 200, 199, 175, 152, 135, 364)),
 }
 
 
 @dataclass(frozen=True)
 class TissueModel:
-    """Parameters of the tissue and cushion springs (kPa, mm). `regions`: name -> (E kPa,
-    thickness mm, stiffness kPa/mm under the flange, template landmark anchors); `blend_mm`:
+    """Parameters of the tissue and cushion springs (kPa, mm). `regions`: name -> `Region`; `blend_mm`:
     Gaussian width of the blending between anchors; `cushion_kpa_per_mm`: effective stiffness of
     the seal flange per unit contact area."""
 
@@ -54,8 +65,8 @@ class TissueModel:
             "model": f"elastic foundation per region, k = the stiffness of a layer of E and thickness on bone under a "
                      f"rigid {STRIP_MM:g} mm strip (finite elements, plane strain, Poisson 0.49), blended between "
                      "template landmarks, in series with the cushion flange's stiffness",
-            "regions": {name: {"youngs_modulus_kpa": e, "thickness_mm": h, "stiffness_kpa_per_mm": k}
-                        for name, (e, h, k, _) in self.regions.items()},
+            "regions": {name: {"youngs_modulus_kpa": r.youngs_kpa, "thickness_mm": r.depth_mm,
+                               "stiffness_kpa_per_mm": r.stiffness_kpa_per_mm} for name, r in self.regions.items()},
             "blend_mm": self.blend_mm,
             "cushion_kpa_per_mm": self.cushion_kpa_per_mm,
         }
@@ -81,8 +92,8 @@ def stiffness(points: np.ndarray, warped: np.ndarray, model: TissueModel = Tissu
     _, nearest = cKDTree(warped).query(points)
     where = template.vertices[nearest]  # the points' places on the template face
     names = list(model.regions)
-    log_k = np.log([k for _, _, k, _ in model.regions.values()])
-    weight = np.stack([_closeness(where, template.vertices[list(model.regions[n][3])], model.blend_mm) for n in names], axis=1)
+    log_k = np.log([r.stiffness_kpa_per_mm for r in model.regions.values()])
+    weight = np.stack([_closeness(where, template.vertices[list(model.regions[n].anchors)], model.blend_mm) for n in names], axis=1)
     tissue = np.exp((weight * log_k).sum(axis=1) / weight.sum(axis=1))
     effective = 1.0 / (1.0 / tissue + 1.0 / model.cushion_kpa_per_mm)
     return Stiffness(tissue, effective, tuple(names[i] for i in weight.argmax(axis=1)))
