@@ -7,7 +7,8 @@ ways at the design's headgear force:
   the truth (`HeadMesh.truth`), the mouth opened by the model's own jawOpen (`ict_head_mesh(...,
   mouth_open_mm=)`), or by a second, independent jaw model (`--jaw hinge`: the mandible turned about
   its hinge as the template population's phantoms open it, `cpapfit.phantom.open_mouth`, on the
-  true template's surface), the mask moved as the state says.
+  true template's surface), lying on the back by the measured skin slide (`cpapfit.evaluate.supine`)
+  carried onto the true template, the mask moved as the state says.
 Also the awake truth, and the mask moved 10 mm sideways on the true face (a cushion that far off must
 leak). Per design: every state's leak, window fraction and peak pressure, predicted and true.
 
@@ -30,7 +31,7 @@ import trimesh
 from cpapfit import __version__
 from cpapfit.errors import CpapfitError
 from cpapfit.evaluate.fit import face_of, fit_cushion
-from cpapfit.evaluate.states import AWAKE, FaceState, moved, sleep_states
+from cpapfit.evaluate.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
 from cpapfit.ict import load_ict, template_truth
 from cpapfit.ict.phantom import ict_head_mesh, random_subject
 from cpapfit.phantom import open_mouth
@@ -87,11 +88,13 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str) -> dict:
     faces = {}
     states = []
     for state in (AWAKE, *sleep_states(mask), FAR):
-        if state.mouth_open_mm not in faces:
+        key = (state.supine, state.mouth_open_mm)
+        if key not in faces:
             surface, truth = head(seed, source, state.mouth_open_mm, jaw)
-            faces[state.mouth_open_mm] = face_of(surface, truth, d.cushion.axis, d.cushion.up)
+            on = face_of(surface, truth, d.cushion.axis, d.cushion.up)
+            faces[key] = state_face(on, motions(truth).supine) if state.supine else on
         params = d.fit_params if state.cpap_cmh2o is None else replace(d.fit_params, cpap_cmh2o=state.cpap_cmh2o)
-        on = faces[state.mouth_open_mm]
+        on = faces[key]
         try:
             true = {n: fit_cushion(moved(m, on, state.shift_mm, state.roll_deg), on, width, force, params).summary()
                     for n, m in cushions.items()}

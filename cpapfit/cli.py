@@ -338,7 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--generic", action="store_true", help="also evaluate the generic (stock) cushion of --mask")
             p.add_argument("--mask", choices=["nasal", "oronasal"], help="the stock cushion for --generic, the states for --states")
             p.add_argument("--states", action="store_true",
-                           help="also press the cushions onto the face asleep: mouth open, mask pushed by a pillow, CPAP 4 and 20 cmH2O")
+                           help="also press the cushions onto the face asleep: supine with the mouth open, mask pushed by a pillow, CPAP 4 and 20 cmH2O")
             p.add_argument("--force", type=float, help="headgear force in N (default: the force recommended for this cushion)")
             p.add_argument("--cpap", type=float, default=10.0, help="CPAP pressure in cmH2O (default 10)")
         p.set_defaults(func={"landmarks": cmd_landmarks, "register": cmd_register, "design": cmd_design, "evaluate": cmd_evaluate}[name])

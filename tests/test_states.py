@@ -8,13 +8,17 @@ from scipy.spatial.transform import Rotation
 from cpapfit.cushion.generic import template_cushion
 from cpapfit.cushion.solid import cushion_sheet
 from cpapfit.evaluate.fit import Face, FitParams, fit_cushion
-from cpapfit.evaluate.states import FaceState, fit_states, jaw_field, moved, sleep_states, state_face
+from cpapfit.evaluate.states import FaceState, fit_states, motions, moved, sleep_states, state_face
 from cpapfit.ict import LOWER_INNER_LIP, template_truth
 from cpapfit.ict.phantom import random_subject
 from cpapfit.pipeline import evaluated_cushions, face_for
 from cpapfit.template import load_template
 
-NOSE_TIP, CHIN = 4, 152
+NOSE_TIP, CHIN, NASAL_BRIDGE = 4, 152, 168
+
+
+def jaw_field(registered):
+    return motions(registered).jaw
 
 
 def test_the_jaw_drops_the_lower_lip_down_and_back_and_leaves_the_nose():
@@ -49,12 +53,29 @@ def test_an_open_mouth_moves_the_scan_with_its_template():
     template = load_template()
     scan = trimesh.Trimesh(template.vertices + [0.0, 0.0, 0.3], template.faces, process=False)
     face = Face(scan, template.mesh(), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
-    jaw = jaw_field(template.vertices)
-    opened = state_face(face, jaw, 10.0)
+    motion = motions(template.vertices)
+    opened = state_face(face, motion.of(FaceState("open", supine=True, mouth_open_mm=10.0)))
     move = np.asarray(opened.scan.vertices) - np.asarray(scan.vertices)
     band = template.regions["oronasal"].band  # where a rim lies (between the lips the neighbours mix)
-    assert np.linalg.norm(move - 10.0 * jaw, axis=1)[band].max() < 0.2  # the scan 0.3 mm off its template moves as it does
-    assert state_face(face, jaw, 0.0) is face
+    expected = 10.0 * motion.jaw + motion.supine
+    assert np.linalg.norm(move - expected, axis=1)[band].max() < 0.2  # the scan 0.3 mm off its template moves as it does
+    assert state_face(face, motion.of(FaceState("awake"))) is face
+
+
+def test_lying_down_slides_the_lower_lateral_face_up_and_out_and_leaves_the_nose():
+    """The measured upright-to-supine slide (Frank et al. 2022) on the template: the nasal bridge and
+    nose tip stay, the angle of the jaw moves cranially and laterally (2.05 and 2.13 mm less their part
+    into the skin), and every vertex moves along the skin."""
+    template = load_template()
+    slide = motions(template.vertices).supine
+    assert np.linalg.norm(slide[[NOSE_TIP, NASAL_BRIDGE]], axis=1).max() < 0.05
+    jaw_angle = np.argmin(np.linalg.norm(template.vertices - [70.0, -70.0, -10.0], axis=1))
+    assert slide[jaw_angle, 1] > 1.0 and slide[jaw_angle, 0] > 0.5
+    assert np.linalg.norm(slide, axis=1).max() <= np.hypot(2.05, 2.13) + 1e-9
+    mirror = template.mirror[jaw_angle]
+    assert slide[mirror] == pytest.approx(slide[jaw_angle] * [-1.0, 1.0, 1.0], abs=0.05)  # out to either side
+    normals = template.mesh().vertex_normals
+    assert np.abs(np.einsum("ij,ij->i", slide, normals)).max() < 1e-9
 
 
 def test_a_pillow_moves_the_mask_across_its_axis_and_turns_it_about_it():
@@ -75,12 +96,12 @@ def test_each_state_gives_what_pressing_the_moved_cushion_onto_its_face_gives():
     template = load_template()
     face = Face(template.mesh(), template.mesh(), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
     cushion = cushion_sheet(template_cushion("oronasal"))
-    states = (FaceState("a", mouth_open_mm=8.0, roll_deg=4.0), FaceState("b", shift_mm=-2.0), FaceState("c", roll_deg=4.0, cpap_cmh2o=15.0))
+    states = (FaceState("a", supine=True, mouth_open_mm=8.0, roll_deg=4.0), FaceState("b", shift_mm=-2.0), FaceState("c", roll_deg=4.0, cpap_cmh2o=15.0))
     got = fit_states({"custom": cushion}, face, states, 5.0, 6.0)
-    jaw = jaw_field(template.vertices)
+    motion = motions(template.vertices)
     for state, fit in zip(states, got):
         params = FitParams() if state.cpap_cmh2o is None else FitParams(cpap_cmh2o=state.cpap_cmh2o)
-        on = state_face(face, jaw, state.mouth_open_mm)
+        on = state_face(face, motion.of(state))
         alone = fit_cushion(moved(cushion, face, state.shift_mm, state.roll_deg), on, 5.0, 6.0, params).summary()
         assert fit.fits["custom"].summary() == pytest.approx(alone, rel=1e-9, abs=1e-9), state.name
 

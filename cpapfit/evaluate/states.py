@@ -1,8 +1,8 @@
 """The sleeping face: states a cushion designed on the awake face must still seal in.
 
-A mask is worn asleep. The jaw drops (the lower lip a median 13 mm with oronasal masks, 6 mm with
-nasal ones), a pillow pushes the mask sideways and rolls it about its axis, and the CPAP pressure
-runs from 4 to 20 cmH2O. Each `FaceState` is one such state; `state_face` and `moved` make the face
+A mask is worn asleep. Lying on the back, the skin slides (`supine.py`) and the jaw drops (the
+lower lip a median 13 mm with oronasal masks, 6 mm with nasal ones); a pillow pushes the mask
+sideways and rolls it about its axis; the CPAP pressure runs from 4 to 20 cmH2O. Each `FaceState` is one such state; `state_face` and `moved` make the face
 and the cushion of it, so the evaluation presses a cushion onto every state as onto the awake face,
 at the awake headgear force (the straps are set once, awake).
 
@@ -10,8 +10,9 @@ The jaw: the ICT Face Model's `jawOpen` shape (an expression the model adds to a
 carried onto the template through the template-ICT correspondence (`cpapfit.ict.template_on_ict`),
 smoothed over the template as the morphable basis is, then onto the patient by the linear part of
 the map from the template to its registration (the face's size and pose), and scaled so that the
-lower inner lip (template landmark 14) moves the state's mouth opening. The scan moves with the
-registered template nearest it (inverse-distance weights of its JAW_NEIGHBOURS nearest vertices).
+lower inner lip (template landmark 14) moves the state's mouth opening. The supine slide is carried
+onto the patient by the same map. The scan moves with the registered template nearest it
+(inverse-distance weights of its NEIGHBOURS nearest vertices).
 """
 
 from dataclasses import dataclass, replace
@@ -22,13 +23,15 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..align.morphable import smooth_fields
+from ..frozen import freeze_arrays
 from ..ict import LOWER_INNER_LIP, load_ict, template_truth
 from ..template import load_template
 from ..errors import InputError
 from .fit import CushionFit, Face, FitParams, fit_rim
 from .rim import find_rim, in_plane, refined
+from .supine import template_supine
 
-JAW_NEIGHBOURS = 4
+NEIGHBOURS = 4
 MOUTH_OPEN_MM = {"nasal": 6.0, "oronasal": 13.0}  # the median mouth opening asleep with each mask (3DPiPPIn)
 PILLOW_SHIFT_MM, PILLOW_ROLL_DEG = 3.0, 5.0
 CPAP_RANGE_CMH2O = (4.0, 20.0)
@@ -36,12 +39,13 @@ CPAP_RANGE_CMH2O = (4.0, 20.0)
 
 @dataclass(frozen=True)
 class FaceState:
-    """One state of the face and mask: `mouth_open_mm` the lower inner lip's drop (mm), `shift_mm`
-    the mask moved across its axis towards the patient's left (negative: right), `roll_deg` turned
-    about its axis (degrees, counter-clockwise as seen from in front), `cpap_cmh2o` the pressure
-    (None: the awake evaluation's)."""
+    """One state of the face and mask: `supine` lying on the back (the skin slid, `supine.py`),
+    `mouth_open_mm` the lower inner lip's drop (mm), `shift_mm` the mask moved across its axis
+    towards the patient's left (negative: right), `roll_deg` turned about its axis (degrees,
+    counter-clockwise as seen from in front), `cpap_cmh2o` the pressure (None: the awake evaluation's)."""
 
     name: str
+    supine: bool = False
     mouth_open_mm: float = 0.0
     shift_mm: float = 0.0
     roll_deg: float = 0.0
@@ -49,7 +53,7 @@ class FaceState:
 
     def parameters(self, awake_cmh2o: float) -> dict:
         """The state's parameters as fit.json records them (`awake_cmh2o`: the awake pressure)."""
-        return {"mouth_open_mm": self.mouth_open_mm, "shift_mm": self.shift_mm, "roll_deg": self.roll_deg,
+        return {"supine": self.supine, "mouth_open_mm": self.mouth_open_mm, "shift_mm": self.shift_mm, "roll_deg": self.roll_deg,
                 "cpap_cmh2o": awake_cmh2o if self.cpap_cmh2o is None else self.cpap_cmh2o}
 
 
@@ -57,13 +61,14 @@ AWAKE = FaceState("awake")
 
 
 def sleep_states(mask: str) -> tuple[FaceState, ...]:
-    """The states a `mask` ("nasal" | "oronasal") cushion is evaluated in besides `AWAKE`: the jaw
-    half and fully dropped, the pillow's shift to either side and roll, the CPAP range's ends."""
+    """The states a `mask` ("nasal" | "oronasal") cushion is evaluated in besides `AWAKE`: lying on
+    the back with the jaw half and fully dropped, the pillow's shift to either side and roll, the
+    CPAP range's ends."""
     mouth = MOUTH_OPEN_MM[mask]
     low, high = CPAP_RANGE_CMH2O
     return (
-        FaceState(f"mouth open {mouth / 2:g} mm", mouth_open_mm=mouth / 2),
-        FaceState(f"mouth open {mouth:g} mm", mouth_open_mm=mouth),
+        FaceState(f"supine, mouth open {mouth / 2:g} mm", supine=True, mouth_open_mm=mouth / 2),
+        FaceState(f"supine, mouth open {mouth:g} mm", supine=True, mouth_open_mm=mouth),
         FaceState(f"pillow: mask {PILLOW_SHIFT_MM:g} mm to the left", shift_mm=PILLOW_SHIFT_MM),
         FaceState(f"pillow: mask {PILLOW_SHIFT_MM:g} mm to the right", shift_mm=-PILLOW_SHIFT_MM),
         FaceState(f"pillow: mask rolled {PILLOW_ROLL_DEG:g} deg", roll_deg=PILLOW_ROLL_DEG),
@@ -83,24 +88,38 @@ def template_jaw() -> np.ndarray:
     return out
 
 
-def jaw_field(registered: np.ndarray) -> np.ndarray:
-    """(N, 3) mm per mm of mouth opening: the jaw's motion on a registered template (N, 3) mm (scan
-    frame), its lower inner lip moving 1 mm."""
+@dataclass(frozen=True)
+class Motions:
+    """The face's motions on a registered template (N, 3) mm each, scan frame: `jaw` per mm of mouth
+    opening (its lower inner lip moving 1 mm), `supine` the skin's slide lying on the back."""
+
+    jaw: np.ndarray
+    supine: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    def of(self, state: FaceState) -> np.ndarray:
+        """(N, 3) mm: how the registered template moves in `state`."""
+        return state.mouth_open_mm * self.jaw + (self.supine if state.supine else 0.0)
+
+
+def motions(registered: np.ndarray) -> Motions:
+    """The `Motions` of a registered template (N, 3) mm: the template's carried onto it by the linear
+    part of the map from the template to it."""
     template = load_template().vertices
     linear = np.linalg.lstsq(np.hstack([template, np.ones((len(template), 1))]), registered, rcond=None)[0][:3]
-    field = template_jaw() @ linear
-    return field / np.linalg.norm(field[LOWER_INNER_LIP])
+    jaw = template_jaw() @ linear
+    return Motions(jaw / np.linalg.norm(jaw[LOWER_INNER_LIP]), template_supine() @ linear)
 
 
-def state_face(face: Face, jaw: np.ndarray, mouth_open_mm: float) -> Face:
-    """The `face` with the mouth opened `mouth_open_mm` mm along the `jaw_field` (N, 3) of its
-    registered template: the registered template and the scan surface (its vertices moved with the
-    template's nearest) both moved. The face itself when the mouth stays closed."""
-    if mouth_open_mm == 0:
+def state_face(face: Face, move: np.ndarray) -> Face:
+    """The `face` with its registered template moved by `move` (N, 3) mm (`Motions.of`) and its scan
+    surface with it (each vertex as the template's nearest). The face itself when nothing moves."""
+    if not move.any():
         return face
-    move = mouth_open_mm * jaw
     registered = np.asarray(face.registered.vertices)
-    dist, near = cKDTree(registered).query(np.asarray(face.scan.vertices), k=JAW_NEIGHBOURS)
+    dist, near = cKDTree(registered).query(np.asarray(face.scan.vertices), k=NEIGHBOURS)
     weight = 1.0 / np.maximum(dist, 1e-6)
     scan_move = np.einsum("vk,vkc->vc", weight, move[near]) / weight.sum(axis=1, keepdims=True)
     return replace(face, scan=_moved_surface(face.scan, scan_move),
@@ -149,16 +168,16 @@ def fit_states(
     refined once, and states that differ only in pressure share their contact lines, those of the
     `awake` fits of the same cushions on this face where given: the numbers are `fit_cushion`'s of
     the moved cushion on the state's face."""
-    jaw = jaw_field(np.asarray(face.registered.vertices))
+    motion = motions(np.asarray(face.registered.vertices))
     fine = {name: refined(mesh) for name, mesh in cushions.items()}  # name -> (mesh, thickness)
-    rims = {(name, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
+    rims = {(name, False, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
     out = []
     for state in states:
         state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
-        on = state_face(face, jaw, state.mouth_open_mm)
+        on = state_face(face, motion.of(state))
         fits, errors = {}, []
         for name, (mesh, thickness) in fine.items():
-            key = (name, state.mouth_open_mm, state.shift_mm, state.roll_deg)
+            key = (name, state.supine, state.mouth_open_mm, state.shift_mm, state.roll_deg)
             try:
                 if key not in rims:
                     rims[key] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis,

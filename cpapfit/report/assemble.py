@@ -62,7 +62,7 @@ def state_picture(shot, d: Design, scale: ColourScale) -> Picture:
     titles = {n: f"{n}: leak {s['leak_l_min']:.1f} L/min, peak {s['pressure_max_kpa']:.1f} kPa" for n, s in summaries.items()}
     arrays = {n: (r.points, np.asarray(r.pressure_kpa), np.asarray(r.open, dtype=bool)) for n, r in rims.items()}
     return Picture("states_pressure.png", "The custom cushion asleep",
-                   "The custom cushion's contact pressure in each state of the sleeping face (mouth open, the mask pushed "
+                   "The custom cushion's contact pressure in each state of the sleeping face (lying on the back with the mouth open, the mask pushed "
                    "sideways or rolled by a pillow, the CPAP range's ends), at the headgear force set awake; drawn on the "
                    "awake face, near-black where the seal opens. The table above gives each state's numbers.",
                    pic.rim_map_picture(shot, arrays, scale, titles, "Contact pressure along the rim, each state", columns=4))
