@@ -19,7 +19,6 @@ Usage: .venv/bin/python bench/sleep_states.py [--seeds 30] [--first 8000] [--wor
 import argparse
 import json
 import platform
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -35,11 +34,10 @@ from cpapfit.evaluate.states import AWAKE, FaceState, motions, moved, sleep_stat
 from cpapfit.ict import load_ict, template_truth
 from cpapfit.ict.phantom import ict_head_mesh, random_subject
 from cpapfit.phantom import open_mouth
-from cpapfit.io import load_scan
 from cpapfit.pipeline import design, evaluated_cushions, place_template
 from cpapfit.template import MASKS, load_template
+from ict_bench import ict_arguments, model_source, scan_of
 
-FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 FAR = FaceState("mask 10 mm to the left", shift_mm=10.0)
 KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region")
 
@@ -63,10 +61,7 @@ def run(job: tuple[int, Path | None, str]) -> list[dict]:
     """Both masks' designs of subject `seed` and their states, predicted and true."""
     seed, source, jaw = job
     mesh, _ = head(seed, source, 0.0, jaw)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "head.ply"
-        path.write_bytes(mesh.export(file_type="ply"))
-        scan = load_scan(path)
+    scan = scan_of(mesh)
     try:
         placed = place_template(scan)
     except CpapfitError as exc:
@@ -135,15 +130,10 @@ def table(rows: list[dict]) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", type=int, default=30)
-    ap.add_argument("--first", type=int, default=8000)
-    ap.add_argument("--workers", type=int, default=2)
+    ict_arguments(ap)
     ap.add_argument("--jaw", default="ict", choices=["ict", "hinge"], help="the true jaw: the ICT model's jawOpen, or the mandible hinged")
-    ap.add_argument("--rows", type=Path, default=None, help="also write every design's row here (JSON lines)")
-    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
-                    help="the ICT model file the faces are drawn from, or 'shipped' (default: ../shared's full model when present)")
     args = ap.parse_args()
-    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    source = model_source(args)
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
           f"{args.first}-{args.first + args.seeds - 1} ({len(load_ict(source).identity)} identity modes), head meshes, "
           f"true jaw: {args.jaw}; {args.workers} workers")

@@ -4,6 +4,7 @@ would otherwise get), placed on the patient by the similarity transform."""
 from functools import lru_cache
 
 import numpy as np
+import trimesh
 
 from ..align.similarity import Similarity
 from ..contact import Contact, template_curve
@@ -17,14 +18,18 @@ NOSE_TIP = 4
 def template_cushion(mask: str, params: CushionParams = CushionParams()) -> Cushion:
     """The cushion designed on the template itself (template frame: axis +z, up +y)."""
     template = load_template()
+    return design_cushion(contact_on(mask, template.mesh()), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]),
+                          template.vertices[NOSE_TIP], params)
+
+
+def contact_on(mask: str, skin: trimesh.Trimesh) -> Contact:
+    """The template's seal curve and band of `mask` on a face of the template's topology (`skin`, mm)."""
     tri, bary = template_curve(mask)
-    mesh = template.mesh()
-    corners = template.faces[tri]
-    curve = np.einsum("kj,kjc->kc", bary, template.vertices[corners])
-    normals = np.einsum("kj,kjc->kc", bary, np.asarray(mesh.vertex_normals)[corners])
+    corners = skin.faces[tri]
+    curve = np.einsum("kj,kjc->kc", bary, skin.vertices[corners])
+    normals = np.einsum("kj,kjc->kc", bary, np.asarray(skin.vertex_normals)[corners])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    contact = Contact(mask, curve, normals, np.ones(len(curve), dtype=bool), template.vertices[template.regions[mask].band])
-    return design_cushion(contact, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), template.vertices[NOSE_TIP], params)
+    return Contact(mask, curve, normals, np.ones(len(curve), dtype=bool), skin.vertices[load_template().regions[mask].band])
 
 
 def place(cushion: Cushion, similarity: Similarity) -> Cushion:

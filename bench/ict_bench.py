@@ -1,0 +1,36 @@
+"""What the benches that draw ICT Face Model subjects share: their command-line arguments, and a
+head mesh read as `cpapfit` reads a scan file."""
+
+import argparse
+import tempfile
+from pathlib import Path
+
+import trimesh
+
+from cpapfit.io import load_scan
+from cpapfit.scan import Scan
+
+FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
+
+
+def ict_arguments(ap: argparse.ArgumentParser, seeds: int = 30, first: int = 8000) -> None:
+    """--seeds, --first, --workers, --rows and --model."""
+    ap.add_argument("--seeds", type=int, default=seeds)
+    ap.add_argument("--first", type=int, default=first)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rows", type=Path, default=None, help="also write every row here (JSON lines)")
+    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
+                    help="the ICT model file the faces are drawn from, or 'shipped' (default: ../shared's full model when present)")
+
+
+def model_source(args: argparse.Namespace) -> Path | None:
+    """The ICT model file `--model` names (None: the shipped model)."""
+    return None if str(args.model) == "shipped" else Path(args.model).resolve()
+
+
+def scan_of(mesh: trimesh.Trimesh) -> Scan:
+    """A mesh written as PLY and read back by `load_scan`, as a scan file is."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "head.ply"
+        path.write_bytes(mesh.export(file_type="ply"))
+        return load_scan(path)

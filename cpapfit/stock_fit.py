@@ -1,0 +1,87 @@
+"""A stock cushion fitted as a clinic fits one: sized by the gauge or by trying each size, seated
+on the nasal bridge and slid across the mask axis to where it seals best, the headgear tightened
+until it seals (and MARGIN more), up to COMFORT_N.
+
+Seating: the stock cushion (`cushion.stock`, template frame) is turned into the face's frame (its
+axis and up) and put with its nasal-bridge point on the registered template's; then moved across
+the axis on a 3 x 3 grid SEAT_STEPS_MM[0] apart and again SEAT_STEPS_MM[1] apart around the best.
+A seat that seals at no more than COMFORT_N is better than one that does not; among those that
+seal, the lower peak pressure at the force that seals them is better; among those that do not, the
+lower leak at COMFORT_N. The best size is the best seat of every size so judged.
+"""
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import trimesh
+
+from .cushion.nurbs import CushionParams
+from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
+from .evaluate.fit import CushionFit, Face, FitParams, fit_rim
+from .evaluate.rim import find_rim, in_plane, refined
+
+COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
+MARGIN = 1.1  # the straps are set this much above the force that just seals
+SEAT_STEPS_MM = (2.0, 1.0)
+
+
+@dataclass(frozen=True)
+class StockFit:
+    """A stock size seated on a face: `size`, `offset_mm` (2,) its seat across the axis from the
+    nasal bridge (side towards the patient's left, up), `fit` pressed at the force the clinic sets,
+    `sealed` whether that force (at most COMFORT_N) closes the seal."""
+
+    size: str
+    offset_mm: tuple
+    fit: CushionFit
+    sealed: bool
+
+    def rank(self) -> tuple:
+        """Smaller is better: sealed first, then the peak pressure (sealed) or the leak (not)."""
+        s = self.fit.summary()
+        return (0, s["pressure_max_kpa"]) if self.sealed else (1, s["leak_l_min"])
+
+
+def gauge_size(mask: str, registered: np.ndarray) -> str:
+    """The size (S, M or L) whose gauge measure lies nearest the face's, from its registered template (N, 3) mm."""
+    measure, mean = gauge_mm(mask, registered), gauge_mm(mask, mean_face())
+    return min(("S", "M", "L"), key=lambda s: abs(measure - mean * size_scale(mask, s)[0]))
+
+
+def best_stock(mask: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> dict[str, StockFit]:
+    """Every stock size of `mask` seated on `face`, best first (size -> StockFit)."""
+    fits = sorted((seated(mask, size, face, params, fit_params) for size in SIZES[mask]), key=StockFit.rank)
+    return {f.size: f for f in fits}
+
+
+def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockFit:
+    """The stock `size` at its best seat on `face` (module docstring)."""
+    mesh, thickness = _refined_stock(mask, size, params)
+    best, centre = None, np.zeros(2)
+    for step in SEAT_STEPS_MM:
+        for offset in centre + step * np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1]), axis=-1).reshape(-1, 2):
+            trial = _pressed(mask, size, mesh, thickness, face, offset, params, fit_params)
+            best = trial if best is None or trial.rank() < best.rank() else best
+        centre = np.asarray(best.offset_mm)
+    return best
+
+
+@lru_cache(maxsize=8)
+def _refined_stock(mask: str, size: str, params: CushionParams) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """The stock solid refined for finding its rim, and its vertices' thickness (`rim.refined`)."""
+    return refined(stock_cushion(mask, size, params)[1])
+
+
+def _pressed(mask, size, mesh, thickness, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
+    """The stock `size` (refined `mesh`, template frame) seated at `offset` (2,) mm and pressed."""
+    side, up = in_plane(face.axis, face.up)
+    turn = np.column_stack([side, up, face.axis])
+    bridge = np.asarray(face.registered.vertices)[BRIDGE] + offset @ np.stack([side, up])
+    placed = trimesh.Trimesh((mesh.vertices - mean_face()[BRIDGE]) @ turn.T + bridge, mesh.faces, process=False)
+    rim = find_rim(placed, face.scan, face.registered, face.axis, face.up, thickness=thickness)
+    at_most = fit_rim(rim, face, params.flange_mm, COMFORT_N, fit_params)
+    seal = at_most.seal_force_n
+    if seal is None or seal * MARGIN > COMFORT_N:
+        return StockFit(size, tuple(offset), at_most, False)
+    return StockFit(size, tuple(offset), fit_rim(rim, face, params.flange_mm, seal * MARGIN, fit_params), True)

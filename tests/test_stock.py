@@ -1,0 +1,57 @@
+"""Stock cushions: sizes spanning the population, a real membrane, the gauge, and a clinic's seating."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from cpapfit.cushion.stock import BRIDGE, mean_face, population_gauge, size_scale, stock_cushion
+from cpapfit.evaluate.fit import Face
+from cpapfit.evaluate.membrane import MEMBRANE_MAX_MM, face_thickness_mm
+from cpapfit.stock_fit import COMFORT_N, gauge_size, seated
+from cpapfit.template import load_template
+
+
+def face_scaled(scale: np.ndarray) -> Face:
+    """The ICT mean face scaled about its nasal bridge (template frame), its own registered template."""
+    v = (mean_face() - mean_face()[BRIDGE]) * scale + mean_face()[BRIDGE]
+    mesh = trimesh.Trimesh(v, load_template().faces, process=False)
+    return Face(mesh, mesh, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+
+
+@pytest.mark.parametrize("mask", ["nasal", "oronasal"])
+def test_the_sizes_span_the_populations_gauge_measure(mask):
+    """S and L are the 15th and 85th percentiles of the gauge's measure over the population, M its median:
+    the rims of the cushions made scale by them (their width across the face within 1.5 %)."""
+    measures = population_gauge(mask)
+    width = {s: np.ptp(stock_cushion(mask, s)[0].grid()[:, 0, 0]) for s in ("S", "M", "L")}
+    for size, pct in (("S", 15), ("L", 85)):
+        expected = np.percentile(measures, pct) / np.median(measures)
+        assert size_scale(mask, size)[0] == pytest.approx(expected, rel=1e-12)
+        assert width[size] / width["M"] == pytest.approx(expected, rel=0.015)
+    assert 0.8 < size_scale(mask, "S")[0] < 0.97 and 1.03 < size_scale(mask, "L")[0] < 1.2
+
+
+def test_a_stock_cushion_is_a_closed_wall_with_a_thin_membrane():
+    _, solid = stock_cushion("oronasal", "M")
+    assert solid.is_watertight and solid.is_volume
+    thickness = face_thickness_mm(solid)
+    area = solid.area_faces
+    thin = thickness < MEMBRANE_MAX_MM
+    assert 0.05 < area[thin].sum() / area.sum() < 0.5  # a membrane, not all membrane
+    assert np.median(thickness[thin]) == pytest.approx(0.5, abs=0.1)
+
+
+@pytest.mark.parametrize("size", ["S", "L"])
+def test_the_gauge_picks_the_size_made_for_a_face_that_size(size):
+    assert gauge_size("oronasal", np.asarray(face_scaled(size_scale("oronasal", size)).registered.vertices)) == size
+
+
+def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
+    """The M oronasal cushion on the face it was made on: seated within a millimetre of the nasal
+    bridge, sealed (no leak) at under COMFORT_N with its peak under the capillary pressure."""
+    fit = seated("oronasal", "M", face_scaled(np.ones(3)))
+    summary = fit.fit.summary()
+    assert fit.sealed and fit.fit.force_n <= COMFORT_N
+    assert np.abs(fit.offset_mm).max() <= 1.0
+    assert summary["leak_l_min"] == 0.0 and summary["pressure_max_kpa"] < 4.3
+    assert summary["rim_covered_fraction"] == 1.0
