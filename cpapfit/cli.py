@@ -7,6 +7,7 @@ import argparse
 import os
 import sys
 import traceback
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import numpy as np
 from . import __version__
 from .errors import CpapfitError, InputError
 from .cushion.nurbs import CushionParams
+from .cushion.stock import SIZES
 from .evaluate.fit import FitParams
 from .evaluate.states import fit_states, sleep_states
 from .io import load_scan
@@ -32,6 +34,7 @@ from .progress import batch_display, stage_display
 from .pipeline import Alignment, evaluate, evaluated_cushions, face_for, missing_stages, place_template, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
+from .stock_fit import fitted_stock, gauge_size, placed_stock
 from .template import load_template
 
 EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
@@ -112,14 +115,16 @@ def design_summary(fit: dict) -> str:
 def fit_summary(fit: dict) -> str:
     """One line per cushion of a fit.json record: pressure, window, leak at its headgear force."""
     lines = []
-    for name in ("custom", "generic"):
+    for name in ("custom", "generic", "stock"):
         if name not in fit:
             continue
         s = fit[name]
+        stock = fit.get("stock_fitting", {}) if name == "stock" else {}
+        label, force = (f"stock {stock['size']}", stock["headgear_force_n"]) if stock else (name, fit["headgear_force_n"])
         cv = "n/a" if s["pressure_cv"] is None else f"{s['pressure_cv']:.2f}"
         seal = "does not seal" if s["seal_force_n"] is None else f"seals from {s['seal_force_n']:.1f} N"
         lines.append(
-            f"{name} at {fit['headgear_force_n']:.1f} N, {fit['cpap_cmh2o']:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
+            f"{label} at {force:.1f} N, {fit['cpap_cmh2o']:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
             f"CV {cv}, max {s['pressure_max_kpa']:.2f} kPa ({s['pressure_max_mmhg']:.0f} mmHg, {s['pressure_max_region']}), "
             f"{100 * s['window_fraction']:.0f} % in the safe window, leak {s['leak_l_min']:.2f} L/min, {seal}"
         )
@@ -138,7 +143,7 @@ def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
     """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`, and its worst."""
     states = fit.get("states", [])[1:]
     parts = []
-    for name in ("custom", "generic"):
+    for name in ("custom", "generic", "stock"):
         rows = [row for row in states if name in row]
         if rows:
             worst = max(rows, key=lambda row: row[name]["leak_l_min"])
@@ -164,8 +169,10 @@ def cmd_design(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    if (args.generic or args.states) and not args.mask:
-        raise CpapfitError("--generic and --states need --mask nasal|oronasal: which stock cushion to compare with, which states to press")
+    if (args.generic or args.states or args.stock) and not args.mask:
+        raise CpapfitError("--generic, --stock and --states need --mask nasal|oronasal: which cushion to compare with, which states to press")
+    if args.stock and args.stock not in (*SIZES[args.mask], "gauge", "best"):
+        raise CpapfitError(f"--stock {args.stock}: the {args.mask} stock sizes are {', '.join(SIZES[args.mask])}, or gauge or best")
     if not 0 < args.cpap <= 30:
         raise CpapfitError(f"--cpap {args.cpap:g} cmH2O: CPAP pressures run from about 4 to 20 cmH2O")
     if args.force is not None and not 0 < args.force <= 200:
@@ -177,10 +184,20 @@ def cmd_evaluate(args) -> int:
     face = face_for(scan, placed.alignment, placed.registration)
     cushions = evaluated_cushions(placed.alignment, cushion, args.mask if args.generic else None)
     fits = evaluate(face, cushions, fit_params=params, force_n=args.force)
+    stock = fitted_stock(args.mask, args.stock, face, fit_params=params) if args.stock else None
+    fits |= {"stock": stock.fit} if stock else {}
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
+    if stock:
+        record["stock_fitting"] = stock.record(gauge_size(args.mask, placed.registration.vertices))
     if args.states:
-        states = fit_states(cushions, face, sleep_states(args.mask), CushionParams().flange_mm, fits["custom"].force_n, params, fits)
+        width = CushionParams().flange_mm
+        states = fit_states(cushions, face, sleep_states(args.mask), width, fits["custom"].force_n, params, fits)
+        if stock:  # the stock cushion at the force the clinic set for it
+            alone = fit_states({"stock": placed_stock(args.mask, stock, face)}, face, sleep_states(args.mask), width,
+                               stock.fit.force_n, params, {"stock": stock.fit})
+            states = tuple(replace(s, fits=s.fits | a.fits, error="; ".join(filter(None, (s.error, a.error))))
+                           for s, a in zip(states, alone))
         record["states"] = states_record(fits, states, params.cpap_cmh2o)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")
@@ -335,8 +352,10 @@ def build_parser() -> argparse.ArgumentParser:
             add_progress_options(p)
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
-            p.add_argument("--generic", action="store_true", help="also evaluate the generic (stock) cushion of --mask")
-            p.add_argument("--mask", choices=["nasal", "oronasal"], help="the stock cushion for --generic, the states for --states")
+            p.add_argument("--generic", action="store_true", help="also evaluate the generic cushion of --mask (the design on the template, placed by the similarity)")
+            p.add_argument("--stock", help="also evaluate a stock cushion of --mask fitted as a clinic fits it: a size (S, M, L; nasal also W), "
+                                           "gauge (the size a sizing gauge picks) or best (every size tried), at its own headgear force")
+            p.add_argument("--mask", choices=["nasal", "oronasal"], help="the cushion for --generic and --stock, the states for --states")
             p.add_argument("--states", action="store_true",
                            help="also press the cushions onto the face asleep: supine with the mouth open, mask pushed by a pillow, CPAP 4 and 20 cmH2O")
             p.add_argument("--force", type=float, help="headgear force in N (default: the force recommended for this cushion)")

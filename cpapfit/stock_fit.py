@@ -37,6 +37,13 @@ class StockFit:
     fit: CushionFit
     sealed: bool
 
+    def record(self, gauge: str) -> dict:
+        """How it was fitted, for fit.json (`gauge`: the gauge's size for this face)."""
+        return {"size": self.size, "gauge_size": gauge, "seat_offset_mm": [round(float(v), 3) for v in self.offset_mm],
+                "headgear_force_n": round(self.fit.force_n, 3), "sealed_within_comfort": self.sealed, "comfort_max_n": COMFORT_N,
+                "fitted": "seated on the nasal bridge and slid across the mask axis to its best seat; the headgear set "
+                          f"{MARGIN:g} times the force that seals it, at most the comfort maximum"}
+
     def rank(self) -> tuple:
         """Smaller is better: sealed first, then the peak pressure (sealed) or the leak (not)."""
         s = self.fit.summary()
@@ -73,13 +80,32 @@ def _refined_stock(mask: str, size: str, params: CushionParams) -> tuple[trimesh
     return refined(stock_cushion(mask, size, params)[1])
 
 
-def _pressed(mask, size, mesh, thickness, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
-    """The stock `size` (refined `mesh`, template frame) seated at `offset` (2,) mm and pressed."""
+def fitted_stock(mask: str, choice: str, face: Face, params: CushionParams = CushionParams(),
+                 fit_params: FitParams = FitParams()) -> StockFit:
+    """The stock cushion a clinic would fit: `choice` a size, "gauge" (the gauge's size) or "best" (every size tried)."""
+    if choice == "best":
+        return next(iter(best_stock(mask, face, params, fit_params).values()))
+    size = gauge_size(mask, np.asarray(face.registered.vertices)) if choice == "gauge" else choice
+    return seated(mask, size, face, params, fit_params)
+
+
+def placed_stock(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams()) -> trimesh.Trimesh:
+    """The stock cushion of `fit` (refined) in its seat on `face` (mm, scan frame)."""
+    return _placed(_refined_stock(mask, fit.size, params)[0], face, np.asarray(fit.offset_mm))
+
+
+def _placed(mesh: trimesh.Trimesh, face: Face, offset: np.ndarray) -> trimesh.Trimesh:
+    """A stock `mesh` (template frame) turned into the face's frame, its nasal bridge on the face's
+    moved `offset` (2,) mm across the axis (side, up)."""
     side, up = in_plane(face.axis, face.up)
     turn = np.column_stack([side, up, face.axis])
     bridge = np.asarray(face.registered.vertices)[BRIDGE] + offset @ np.stack([side, up])
-    placed = trimesh.Trimesh((mesh.vertices - mean_face()[BRIDGE]) @ turn.T + bridge, mesh.faces, process=False)
-    rim = find_rim(placed, face.scan, face.registered, face.axis, face.up, thickness=thickness)
+    return trimesh.Trimesh((mesh.vertices - mean_face()[BRIDGE]) @ turn.T + bridge, mesh.faces, process=False)
+
+
+def _pressed(mask, size, mesh, thickness, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
+    """The stock `size` (refined `mesh`, template frame) seated at `offset` (2,) mm and pressed."""
+    rim = find_rim(_placed(mesh, face, offset), face.scan, face.registered, face.axis, face.up, thickness=thickness)
     at_most = fit_rim(rim, face, params.flange_mm, COMFORT_N, fit_params)
     seal = at_most.seal_force_n
     if seal is None or seal * MARGIN > COMFORT_N:

@@ -188,6 +188,8 @@ def test_evaluate_refuses_bad_cushions_and_options_before_any_work(cli, tmp_path
         (("--cushion", tmp_path / "none.stl"), "no such file"),
         (("--cushion", tmp_path / "metres.stl"), "millimetres"),
         (("--cushion", tmp_path / "metres.stl", "--generic"), "--mask"),
+        (("--cushion", tmp_path / "metres.stl", "--stock", "M"), "--mask"),
+        (("--cushion", tmp_path / "metres.stl", "--mask", "oronasal", "--stock", "W"), "--stock"),
         (("--cushion", tmp_path / "metres.stl", "--force", "-3"), "--force"),
         (("--cushion", tmp_path / "metres.stl", "--cpap", "80"), "--cpap"),
     ]

@@ -87,7 +87,8 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     for key in ("cpap_cmh2o", "headgear_force_n", "custom", "generic", "tissue_model", "cpapfit_version"):
         assert key in fit
     evaluated = tmp_path / "evaluated.json"
-    code, _, err = cli("evaluate", phantom1_dir, "--cushion", out / "cushion.stl", "--mask", "oronasal", "--states", "--out", evaluated)
+    code, _, err = cli("evaluate", phantom1_dir, "--cushion", out / "cushion.stl", "--mask", "oronasal", "--states", "--stock", "gauge",
+                       "--out", evaluated)
     assert code == 0, err
     again = json.loads(evaluated.read_text())  # the written STL, evaluated alone, gives design's numbers
     assert set(again) >= {"cpap_cmh2o", "headgear_force_n", "custom", "tissue_model", "states"} and "generic" not in again
@@ -99,6 +100,9 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
         for key in ("leak_l_min", "pressure_max_kpa"):
             assert state["custom"][key] == pytest.approx(designed_state["custom"][key], abs=0.05), (state["name"], key)
     assert "mouth open 13 mm" in err
+    stock = again["stock_fitting"]  # the gauge's stock size, seated and strapped as a clinic does, in every state at its own force
+    assert stock["size"] == stock["gauge_size"] in ("S", "M", "L") and 0 < stock["headgear_force_n"] <= stock["comfort_max_n"]
+    assert all("stock" in state for state in again["states"]) and f"stock {stock['size']} at" in err
 
 
 def test_3mf_is_in_millimetres_and_deterministic(designed):
