@@ -1,5 +1,5 @@
-"""The generic cushion: the same design on the un-warped template (the stock mask a patient
-would otherwise get), placed on the patient by the similarity transform."""
+"""The generic cushion: the same design on the un-warped template, placed on the patient by the
+similarity transform (scaled to the face); and the template's seal on any face of its topology."""
 
 from functools import lru_cache
 
