@@ -12,8 +12,11 @@ ways at the design's headgear force:
 Also the awake truth, and the mask moved 10 mm sideways on the true face (a cushion that far off must
 leak). Per design: every state's leak, window fraction and peak pressure, predicted and true.
 
+With --stock, also the best stock size (`cpapfit.stock_fit`) seated on the true awake face as a clinic
+seats it and pressed in every state at its own headgear force.
+
 Usage: .venv/bin/python bench/sleep_states.py [--seeds 30] [--first 8000] [--workers 2] [--jaw ict|hinge]
-       [--rows rows.jsonl] [--model NPZ | --model shipped]
+       [--rows rows.jsonl] [--model NPZ | --model shipped] [--stock]
 """
 
 import argparse
@@ -29,12 +32,14 @@ import trimesh
 
 from cpapfit import __version__
 from cpapfit.errors import CpapfitError
-from cpapfit.evaluate.fit import face_of, fit_cushion
+from cpapfit.evaluate.fit import face_of, fit_rim
+from cpapfit.evaluate.rim import find_rim
 from cpapfit.evaluate.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
 from cpapfit.ict import load_ict, template_truth
 from cpapfit.ict.phantom import ict_head_mesh, random_subject
 from cpapfit.phantom import open_mouth
 from cpapfit.pipeline import design, evaluated_cushions, place_template
+from cpapfit.stock_fit import fitted_stock, placed_stock
 from cpapfit.template import MASKS, load_template
 from ict_bench import ict_arguments, model_source, scan_of
 
@@ -57,19 +62,19 @@ def head(seed: int, source: Path | None, mouth_open_mm: float, jaw: str):
     return trimesh.Trimesh(truth, template.faces, process=False), truth
 
 
-def run(job: tuple[int, Path | None, str]) -> list[dict]:
+def run(job: tuple[int, Path | None, str, bool]) -> list[dict]:
     """Both masks' designs of subject `seed` and their states, predicted and true."""
-    seed, source, jaw = job
+    seed, source, jaw, stock = job
     mesh, _ = head(seed, source, 0.0, jaw)
     scan = scan_of(mesh)
     try:
         placed = place_template(scan)
     except CpapfitError as exc:
         return [{"seed": seed, "mask": m, "outcome": "refused", "reason": str(exc)[:200]} for m in MASKS]
-    return [_measured(seed, mask, scan, placed, source, jaw) for mask in MASKS]
+    return [_measured(seed, mask, scan, placed, source, jaw, stock) for mask in MASKS]
 
 
-def _measured(seed: int, mask: str, scan, placed, source, jaw: str) -> dict:
+def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool) -> dict:
     row = {"seed": seed, "mask": mask}
     t0 = time.perf_counter()
     try:
@@ -77,10 +82,14 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str) -> dict:
     except CpapfitError as exc:
         return {**row, "outcome": "refused", "reason": str(exc)[:200]}
     row["design_s"] = time.perf_counter() - t0
-    cushions = evaluated_cushions(d.alignment, d.solid, mask)
     force, width = d.fits["custom"].force_n, d.cushion.params.flange_mm
+    pressed = {n: (m, None, force) for n, m in evaluated_cushions(d.alignment, d.solid, mask).items()}  # name -> (mesh, thickness, N)
     predicted = {AWAKE.name: d.fits} | {s.state.name: s.fits for s in d.states}
-    faces = {}
+    faces = {(False, 0.0): face_of(*head(seed, source, 0.0, jaw), d.cushion.axis, d.cushion.up)}
+    if stock:  # the best stock size, seated on the true face as a clinic seats it, at its own force
+        fitted = fitted_stock(mask, "best", faces[(False, 0.0)], fit_params=d.fit_params)
+        row["stock"] = fitted.record("")
+        pressed["stock"] = (*placed_stock(mask, fitted, faces[(False, 0.0)]), fitted.fit.force_n)
     states = []
     for state in (AWAKE, *sleep_states(mask), FAR):
         key = (state.supine, state.mouth_open_mm)
@@ -91,8 +100,9 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str) -> dict:
         params = d.fit_params if state.cpap_cmh2o is None else replace(d.fit_params, cpap_cmh2o=state.cpap_cmh2o)
         on = faces[key]
         try:
-            true = {n: fit_cushion(moved(m, on, state.shift_mm, state.roll_deg), on, width, force, params).summary()
-                    for n, m in cushions.items()}
+            true = {n: fit_rim(find_rim(moved(m, on, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up,
+                                        thickness=t), on, width, f, params).summary()
+                    for n, (m, t, f) in pressed.items()}
         except CpapfitError as exc:
             return {**row, "outcome": "not evaluated", "reason": f"{state.name}: {exc}"[:200]}
         pred = {n: f.summary() for n, f in predicted.get(state.name, {}).items()}
@@ -128,17 +138,44 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def stock_tables(rows: list[dict]) -> str:
+    """Markdown: custom beside the best stock size, per mask and state (shares of designs at most
+    2 L/min and with the peak at most 4.3 kPa, medians), then per subject (in how many of the sleep
+    states each seals at most 2 L/min and keeps its peak at most 4.3 kPa)."""
+    made = [r for r in rows if r["outcome"] == "made" and "stock" in r]
+    out = ["| mask | state | n | custom <= 2 L/min | custom peak <= 4.3 kPa | stock <= 2 L/min | stock peak <= 4.3 kPa "
+           "| custom / stock peak median (kPa) |", "|---" * 8 + "|"]
+    for mask in MASKS:
+        got = [r for r in made if r["mask"] == mask]
+        for i, name in enumerate(s["name"] for s in got[0]["states"] if got):
+            share = lambda n, k, lim: 100 * np.mean([r["states"][i][f"true_{n}"][k] <= lim for r in got])  # noqa: E731
+            med = lambda n: np.median([r["states"][i][f"true_{n}"]["pressure_max_kpa"] for r in got])  # noqa: E731
+            out.append(f"| {mask} | {name} | {len(got)} | {share('custom', 'leak_l_min', 2.0):.0f} % "
+                       f"| {share('custom', 'pressure_max_kpa', 4.3):.0f} % | {share('stock', 'leak_l_min', 2.0):.0f} % "
+                       f"| {share('stock', 'pressure_max_kpa', 4.3):.0f} % | {med('custom'):.2f} / {med('stock'):.2f} |")
+    out += ["", "| subject | mask | stock size | stock force (N) | custom force (N) | sleep states sealed, custom / stock "
+                "| sleep states peak <= 4.3 kPa, custom / stock |", "|---" * 7 + "|"]
+    for r in made:
+        asleep = r["states"][1:-1]  # the sleep states (not awake, not the mask 10 mm off)
+        count = lambda n, k, lim: sum(s[f"true_{n}"][k] <= lim for s in asleep)  # noqa: E731
+        out.append(f"| {r['seed']} | {r['mask']} | {r['stock']['size']} | {r['stock']['headgear_force_n']:.1f} | {r['force_n']:.1f} "
+                   f"| {count('custom', 'leak_l_min', 2.0)} / {count('stock', 'leak_l_min', 2.0)} of {len(asleep)} "
+                   f"| {count('custom', 'pressure_max_kpa', 4.3)} / {count('stock', 'pressure_max_kpa', 4.3)} |")
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ict_arguments(ap)
     ap.add_argument("--jaw", default="ict", choices=["ict", "hinge"], help="the true jaw: the ICT model's jawOpen, or the mandible hinged")
+    ap.add_argument("--stock", action="store_true", help="also the best stock size fitted as a clinic fits it, at its own force")
     args = ap.parse_args()
     source = model_source(args)
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
           f"{args.first}-{args.first + args.seeds - 1} ({len(load_ict(source).identity)} identity modes), head meshes, "
           f"true jaw: {args.jaw}; {args.workers} workers")
     rows, t0 = [], time.perf_counter()
-    jobs = [(seed, source, args.jaw) for seed in range(args.first, args.first + args.seeds)]
+    jobs = [(seed, source, args.jaw, args.stock) for seed in range(args.first, args.first + args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         for done in pool.map(run, jobs):
             for row in done:
@@ -150,6 +187,9 @@ def main() -> None:
     print(f"\n{len(made)} of {len(rows)} designs made; design time (with its states) median "
           f"{np.median([r['design_s'] for r in made]):.1f} s\n")
     print(table(rows))
+    if args.stock:
+        print()
+        print(stock_tables(rows))
     print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
 
 

@@ -194,7 +194,7 @@ def cmd_evaluate(args) -> int:
         width = CushionParams().flange_mm
         states = fit_states(cushions, face, sleep_states(args.mask), width, fits["custom"].force_n, params, fits)
         if stock:  # the stock cushion at the force the clinic set for it
-            alone = fit_states({"stock": placed_stock(args.mask, stock, face)}, face, sleep_states(args.mask), width,
+            alone = fit_states({"stock": placed_stock(args.mask, stock, face)[0]}, face, sleep_states(args.mask), width,
                                stock.fit.force_n, params, {"stock": stock.fit})
             states = tuple(replace(s, fits=s.fits | a.fits, error="; ".join(filter(None, (s.error, a.error))))
                            for s, a in zip(states, alone))

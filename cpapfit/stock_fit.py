@@ -89,9 +89,11 @@ def fitted_stock(mask: str, choice: str, face: Face, params: CushionParams = Cus
     return seated(mask, size, face, params, fit_params)
 
 
-def placed_stock(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams()) -> trimesh.Trimesh:
-    """The stock cushion of `fit` (refined) in its seat on `face` (mm, scan frame)."""
-    return _placed(_refined_stock(mask, fit.size, params)[0], face, np.asarray(fit.offset_mm))
+def placed_stock(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams()) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """(the stock cushion of `fit`, refined, in its seat on `face` (mm, scan frame); its vertices'
+    thickness, mm: what `find_rim` takes for a refined cushion)."""
+    mesh, thickness = _refined_stock(mask, fit.size, params)
+    return _placed(mesh, face, np.asarray(fit.offset_mm)), thickness
 
 
 def _placed(mesh: trimesh.Trimesh, face: Face, offset: np.ndarray) -> trimesh.Trimesh:
