@@ -7,7 +7,6 @@ import argparse
 import os
 import sys
 import traceback
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ from .errors import CpapfitError, InputError
 from .cushion.nurbs import CushionParams
 from .cushion.stock import SIZES
 from .evaluate.fit import FitParams
-from .evaluate.states import fit_states, sleep_states
+from .evaluate.states import fit_states, merged, sleep_states
 from .io import load_scan
 from .io.cushion import load_cushion
 from .io.landmarks import landmarks_record
@@ -196,8 +195,7 @@ def cmd_evaluate(args) -> int:
         if stock:  # the stock cushion at the force the clinic set for it
             alone = fit_states({"stock": placed_stock(args.mask, stock, face)[0]}, face, sleep_states(args.mask), width,
                                stock.fit.force_n, params, {"stock": stock.fit})
-            states = tuple(replace(s, fits=s.fits | a.fits, error="; ".join(filter(None, (s.error, a.error))))
-                           for s, a in zip(states, alone))
+            states = tuple(map(merged, states, alone))
         record["states"] = states_record(fits, states, params.cpap_cmh2o)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")

@@ -2,9 +2,10 @@
 
 A mask is worn asleep. Lying on the back, the skin slides (`supine.py`) and the jaw drops (the
 lower lip a median 13 mm with oronasal masks, 6 mm with nasal ones); a pillow pushes the mask
-sideways and rolls it about its axis; the CPAP pressure runs from 4 to 20 cmH2O. Each `FaceState` is one such state; `state_face` and `moved` make the face
-and the cushion of it, so the evaluation presses a cushion onto every state as onto the awake face,
-at the awake headgear force (the straps are set once, awake).
+sideways and rolls it about its axis; the CPAP pressure runs from 4 to 20 cmH2O. Each `FaceState`
+is one such state; `state_face` and `moved` make the face and the cushion of it, so the evaluation
+presses a cushion onto every state as onto the awake face, at the awake headgear force (the straps
+are set once, awake).
 
 The jaw: the ICT Face Model's `jawOpen` shape (an expression the model adds to any identity),
 carried onto the template through the template-ICT correspondence (`cpapfit.ict.template_on_ict`),
@@ -188,3 +189,8 @@ def fit_states(
             fits[name] = fit_rim(rims[key], on, width_mm, force_n, state_params)
         out.append(StateFit(state, fits, "; ".join(errors)))
     return tuple(out)
+
+
+def merged(a: StateFit, b: StateFit) -> StateFit:
+    """One state's fits of two sets of cushions (pressed at their own forces) as one."""
+    return replace(a, fits=a.fits | b.fits, error="; ".join(filter(None, (a.error, b.error))))
