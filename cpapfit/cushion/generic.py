@@ -12,14 +12,14 @@ from ..template import load_template
 from .nurbs import Cushion, CushionParams, design_cushion
 
 NOSE_TIP = 4
+AXIS, UP = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])  # the template frame's mask axis and up
 
 
 @lru_cache(maxsize=4)
 def template_cushion(mask: str, params: CushionParams = CushionParams()) -> Cushion:
     """The cushion designed on the template itself (template frame: axis +z, up +y)."""
     template = load_template()
-    return design_cushion(contact_on(mask, template.mesh()), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]),
-                          template.vertices[NOSE_TIP], params)
+    return design_cushion(contact_on(mask, template.mesh()), AXIS, UP, template.vertices[NOSE_TIP], params)
 
 
 def contact_on(mask: str, skin: trimesh.Trimesh) -> Contact:

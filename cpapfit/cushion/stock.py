@@ -18,7 +18,7 @@ import trimesh
 from ..ict import ict_face, load_ict, template_truth
 from ..ict.phantom import random_subject
 from ..template import load_template
-from .generic import NOSE_TIP, contact_on
+from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
 from .solid import cushion_solid, with_membrane
 
@@ -71,7 +71,6 @@ def stock_cushion(mask: str, size: str, params: CushionParams = CushionParams())
     scaled = (face - bridge) * scale + bridge
     skin = trimesh.Trimesh(scaled, load_template().faces, process=False)
     contact = contact_on(mask, skin)
-    cushion = design_cushion(contact, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), scaled[NOSE_TIP], params, None,
-                             np.full(AROUND, MEMBRANE_MM), skin)
+    cushion = design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params, None, np.full(AROUND, MEMBRANE_MM), skin)
     wall = cushion_solid(cushion, contact.normals)[0]
     return cushion, with_membrane(cushion, wall, contact.normals)[0]

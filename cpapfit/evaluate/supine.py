@@ -18,7 +18,6 @@ on their fascia, so the measured figures are used.
 from functools import lru_cache
 
 import numpy as np
-import trimesh
 
 from ..template import load_template
 
@@ -41,7 +40,7 @@ def template_supine() -> np.ndarray:
     weights = np.column_stack([lateral, lower])
     outwards = np.sign(v[:, 0]) * _blend(np.abs(v[:, 0]) - 0.5 * BLEND_MM)  # the midline does not move sideways
     slide = np.column_stack([outwards * (weights @ LATERAL_MM), weights @ CRANIAL_MM, np.zeros(len(v))])
-    normals = trimesh.Trimesh(v, template.faces, process=False).vertex_normals
+    normals = template.mesh().vertex_normals
     out = slide - np.einsum("ij,ij->i", slide, normals)[:, None] * normals
     out.flags.writeable = False
     return out
