@@ -1,4 +1,4 @@
-"""The README's table of quality gates states the thresholds `QualityParams` holds."""
+"""The table of quality gates in docs/quality_gates.md states the thresholds `QualityParams` holds."""
 
 import re
 from pathlib import Path
@@ -7,7 +7,7 @@ import pytest
 
 from cpapfit.quality import QualityParams
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+GATES_PAGE = Path(__file__).resolve().parent.parent / "docs" / "quality_gates.md"
 # (gate code, words its row starts with) -> the QualityParams fields of its (flagged, refused) thresholds
 ROWS = {
     ("coverage", ""): ("coverage_flag", "coverage_refuse"),
@@ -29,8 +29,8 @@ ALWAYS_FLAGGED = ("landmark_free",)  # no threshold: flagged whenever it happens
 
 
 def table() -> list[list[str]]:
-    """The cells of each row of the README's gate table: code, measure, flagged, refused."""
-    rows = [re.match(r"\| `(\w+)` \| (.*) \| (.*) \| (.*) \|$", line) for line in README.read_text().splitlines()]
+    """The cells of each row of the gate table: code, measure, flagged, refused."""
+    rows = [re.match(r"\| `(\w+)` \| (.*) \| (.*) \| (.*) \|$", line) for line in GATES_PAGE.read_text().splitlines()]
     return [list(m.groups()) for m in rows if m and m.group(1) in {code for code, _ in ROWS} | set(ALWAYS_FLAGGED)]
 
 
