@@ -15,7 +15,7 @@ from . import __version__
 from .errors import CpapfitError, InputError
 from .cushion.nurbs import CushionParams
 from .cushion.stock import SIZES
-from .evaluate.fit import FitParams
+from .evaluate.fit import CUSHIONS, FitParams
 from .evaluate.states import fit_states, merged, sleep_states
 from .io import load_scan
 from .io.cushion import load_cushion
@@ -33,7 +33,7 @@ from .progress import batch_display, stage_display
 from .pipeline import Alignment, evaluate, evaluated_cushions, face_for, missing_stages, place_template, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
-from .stock_fit import fitted_stock, gauge_size, placed_stock
+from .stock_fit import fitted_stock, gauge_size, stock_states
 from .template import load_template
 
 EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
@@ -114,16 +114,15 @@ def design_summary(fit: dict) -> str:
 def fit_summary(fit: dict) -> str:
     """One line per cushion of a fit.json record: pressure, window, leak at its headgear force."""
     lines = []
-    for name in ("custom", "generic", "stock"):
+    for name in CUSHIONS:
         if name not in fit:
             continue
         s = fit[name]
-        stock = fit.get("stock_fitting", {}) if name == "stock" else {}
-        label, force = (f"stock {stock['size']}", stock["headgear_force_n"]) if stock else (name, fit["headgear_force_n"])
+        label = f"stock {fit['stock_fitting']['size']}" if name == "stock" else name
         cv = "n/a" if s["pressure_cv"] is None else f"{s['pressure_cv']:.2f}"
         seal = "does not seal" if s["seal_force_n"] is None else f"seals from {s['seal_force_n']:.1f} N"
         lines.append(
-            f"{label} at {force:.1f} N, {fit['cpap_cmh2o']:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
+            f"{label} at {s['headgear_force_n']:.1f} N, {fit['cpap_cmh2o']:g} cmH2O: rim pressure mean {s['pressure_mean_kpa']:.2f} kPa, "
             f"CV {cv}, max {s['pressure_max_kpa']:.2f} kPa ({s['pressure_max_mmhg']:.0f} mmHg, {s['pressure_max_region']}), "
             f"{100 * s['window_fraction']:.0f} % in the safe window, leak {s['leak_l_min']:.2f} L/min, {seal}"
         )
@@ -133,7 +132,7 @@ def fit_summary(fit: dict) -> str:
 def state_summary(row: dict) -> str:
     """One line on a state of fit.json's `states`: each cushion's leak and peak pressure."""
     cells = [f"{name} leak {row[name]['leak_l_min']:.1f} L/min, peak {row[name]['pressure_max_kpa']:.2f} kPa"
-             for name in ("custom", "generic") if name in row]
+             for name in CUSHIONS if name in row]
     cells += [f"not evaluated ({row['error']})"] if "error" in row else []
     return f"{row['name']}: {'; '.join(cells)}"
 
@@ -142,7 +141,7 @@ def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
     """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`, and its worst."""
     states = fit.get("states", [])[1:]
     parts = []
-    for name in ("custom", "generic", "stock"):
+    for name in CUSHIONS:
         rows = [row for row in states if name in row]
         if rows:
             worst = max(rows, key=lambda row: row[name]["leak_l_min"])
@@ -153,7 +152,7 @@ def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
 
 
 def report_summary(out: Path, fit: dict) -> str:
-    """Where the report is and its headline numbers (custom vs generic, awake and asleep)."""
+    """Where the report is and its headline numbers (custom vs stock, awake and asleep)."""
     return f"report: {out / 'report.html'} (open it in a browser)\n  {fit_summary(fit)}\n  {asleep_summary(fit)}"
 
 
@@ -193,9 +192,7 @@ def cmd_evaluate(args) -> int:
         width = CushionParams().flange_mm
         states = fit_states(cushions, face, sleep_states(args.mask), width, fits["custom"].force_n, params, fits)
         if stock:  # the stock cushion at the force the clinic set for it
-            alone = fit_states({"stock": placed_stock(args.mask, stock, face)[0]}, face, sleep_states(args.mask), width,
-                               stock.fit.force_n, params, {"stock": stock.fit})
-            states = tuple(map(merged, states, alone))
+            states = tuple(map(merged, states, stock_states(args.mask, stock, face, fit_params=params)))
         record["states"] = states_record(fits, states, params.cpap_cmh2o)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")

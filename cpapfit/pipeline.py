@@ -20,7 +20,7 @@ from .compensation import Preload, compensated_cushion
 from .envelope import enveloped_cushion
 from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluate.gap import RimGap, rim_gap
-from .evaluate.states import StateFit, fit_states, sleep_states
+from .evaluate.states import StateFit, fit_states, merged, sleep_states
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
 from .proportions import proportions
@@ -29,6 +29,7 @@ from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .metrics import mask_region
 from .scan import Scan, scan_surface
+from .stock_fit import StockComparison, compared_stock
 from .template import load_template
 from .work import at_once
 
@@ -159,9 +160,10 @@ class Design:
     preload: Preload  # the rim set into the skin along the axis, along the seal curve
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
     mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
-    fits: dict  # {"custom" | "generic": CushionFit}, both at the custom cushion's recommended force
+    fits: dict  # {"custom" | "stock": CushionFit}: the custom cushion at its recommended force, the best stock size at its own
     fit_params: FitParams
-    states: tuple[StateFit, ...]  # both cushions in each sleep state (`sleep_states`), at the same force
+    states: tuple[StateFit, ...]  # both cushions in each sleep state (`sleep_states`), each at its awake force
+    stock: StockComparison  # the stock cushion a clinic would fit on this face: every size, the gauge's pick
 
     def preload_at(self, points: np.ndarray) -> np.ndarray:
         """(K,) mm: the pre-load at the seal-curve point nearest each of (K, 3) `points`."""
@@ -197,15 +199,17 @@ def design(
     placement: Placement | None = None,
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
-    design with a pressure-compensating pre-load, thicken, check, mould, then press the custom and
-    the generic cushion onto the face. `on_stage(name)` is called as each stage starts; the mould
-    is made by `submit` (`work.py`), alongside the evaluation when that is a worker process's.
+    design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
+    cushion onto the face awake and asleep, beside the stock cushion a clinic would fit
+    (`compared_stock`). `on_stage(name)` is called as each stage starts; the stock cushion is
+    fitted by `submit` (`work.py`), alongside the design when that is a worker process's.
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
     placement = placement or place_template(scan, user_landmarks, on_stage)
     al, reg, by_shape = placement.alignment, placement.registration, placement.by_shape
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
+    stock = submit(compared_stock, mask, face, params, fit_params)
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
     on_stage("cushion")
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
@@ -219,13 +223,13 @@ def design(
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
     checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould")
-    moulding = submit(checked_mould, cushion, solid)
-    cushions = evaluated_cushions(al, solid, mask, params)
-    fits = evaluate(face, cushions, params, fit_params)
-    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
-    moulded = moulding.result()
-    return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload,
-                  moulded.parts, moulded.draft, fits, fit_params, states)
+    moulded = checked_mould(cushion, solid)
+    fits = evaluate(face, {"custom": solid}, params, fit_params)
+    states = fit_states({"custom": solid}, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
+    on_stage("the stock cushion a clinic would fit")
+    stock = stock.result()
+    return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload, moulded.parts, moulded.draft,
+                  fits | {"stock": stock.best.fit}, fit_params, tuple(map(merged, states, stock.states)), stock)
 
 
 def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):

@@ -3,11 +3,13 @@ on the nasal bridge and slid across the mask axis to where it seals best, the he
 until it seals (and MARGIN more), up to COMFORT_N.
 
 Seating: the stock cushion (`cushion.stock`, template frame) is turned into the face's frame (its
-axis and up) and put with its nasal-bridge point on the registered template's; then moved across
-the axis on a 3 x 3 grid SEAT_STEPS_MM[0] apart and again SEAT_STEPS_MM[1] apart around the best.
-A seat that seals at no more than COMFORT_N is better than one that does not; among those that
-seal, the lower peak pressure at the force that seals them is better; among those that do not, the
-lower leak at COMFORT_N. The best size is the best seat of every size so judged.
+axis and up) and put with its nasal-bridge point on the registered template's; then walked across
+the axis as a clinician slides it: from the bridge, the four seats SEAT_STEPS_MM[0] away up, down
+and to either side are tried and the best taken, until none is better; then the same in steps of
+SEAT_STEPS_MM[1]; never further than SEAT_REACH_MM from the bridge. A seat that seals at no more
+than COMFORT_N is better than one that does not; among those that seal, the lower peak pressure
+at the force that seals them is better; among those that do not, the lower leak at COMFORT_N.
+The best size is the best seat of every size so judged.
 """
 
 from dataclasses import dataclass
@@ -20,10 +22,13 @@ from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
 from .evaluate.fit import CushionFit, Face, FitParams, fit_rim
 from .evaluate.rim import find_rim, in_plane, refined
+from .evaluate.states import StateFit, fit_states, sleep_states
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals
 SEAT_STEPS_MM = (2.0, 1.0)
+SEAT_REACH_MM = 4.0  # a stock cushion is seated on the nasal bridge: slid at most this far from it
+COMPASS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,45 @@ class StockFit:
         return (0, s["pressure_max_kpa"]) if self.sealed else (1, s["leak_l_min"])
 
 
+@dataclass(frozen=True)
+class StockComparison:
+    """The stock cushion a clinic would fit on a face, to set beside the custom one: every size at
+    its best seat (`sizes`, best first), the size the gauge picks, and the best size pressed in
+    each sleep state (`sleep_states`) at the force the clinic set for it."""
+
+    sizes: tuple[StockFit, ...]
+    gauge: str
+    states: tuple[StateFit, ...]
+
+    @property
+    def best(self) -> StockFit:
+        return self.sizes[0]
+
+    def record(self) -> dict:
+        """fit.json's `stock_fitting`: how the best size was fitted, and every size tried."""
+        tried = {f.size: {"seat_offset_mm": [round(float(v), 3) for v in f.offset_mm], "headgear_force_n": round(f.fit.force_n, 3),
+                          "sealed_within_comfort": f.sealed, **{k: f.fit.summary()[k] for k in SIZE_KEYS}} for f in self.sizes}
+        return self.best.record(self.gauge) | {"sizes_best_first": tried}
+
+
+SIZE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region")
+
+
+def compared_stock(mask: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockComparison:
+    """Every stock size of `mask` seated on `face`, the gauge's pick, and the best size in each sleep state."""
+    sizes = tuple(best_stock(mask, face, params, fit_params).values())
+    gauge = gauge_size(mask, np.asarray(face.registered.vertices))
+    return StockComparison(sizes, gauge, stock_states(mask, sizes[0], face, params, fit_params))
+
+
+def stock_states(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams(),
+                 fit_params: FitParams = FitParams()) -> tuple[StateFit, ...]:
+    """The stock cushion of `fit` in each sleep state of `mask` on `face`, at the force set for it, as "stock"."""
+    mesh, thickness = placed_stock(mask, fit, face, params)
+    return fit_states({"stock": mesh}, face, sleep_states(mask), params.flange_mm, fit.fit.force_n, fit_params,
+                      {"stock": fit.fit}, {"stock": thickness})
+
+
 def gauge_size(mask: str, registered: np.ndarray) -> str:
     """The size (S, M or L) whose gauge measure lies nearest the face's, from its registered template (N, 3) mm."""
     measure, mean = gauge_mm(mask, registered), gauge_mm(mask, mean_face())
@@ -64,13 +108,23 @@ def best_stock(mask: str, face: Face, params: CushionParams = CushionParams(), f
 
 def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockFit:
     """The stock `size` at its best seat on `face` (module docstring)."""
-    mesh, thickness = _refined_stock(mask, size, params)
-    best, centre = None, np.zeros(2)
+    mesh = _refined_stock(mask, size, params)
+    tried = {}
+
+    def at(offset: np.ndarray) -> StockFit:
+        key = tuple(np.round(offset, 6))
+        if key not in tried:
+            tried[key] = _pressed(size, mesh, face, offset, params, fit_params)
+        return tried[key]
+
+    best = at(np.zeros(2))
     for step in SEAT_STEPS_MM:
-        for offset in centre + step * np.stack(np.meshgrid([-1, 0, 1], [-1, 0, 1]), axis=-1).reshape(-1, 2):
-            trial = _pressed(mask, size, mesh, thickness, face, offset, params, fit_params)
-            best = trial if best is None or trial.rank() < best.rank() else best
-        centre = np.asarray(best.offset_mm)
+        while True:
+            seats = [o for o in np.asarray(best.offset_mm) + step * COMPASS if np.linalg.norm(o) <= SEAT_REACH_MM + 1e-9]
+            better = min(map(at, seats), key=StockFit.rank)
+            if better.rank() >= best.rank():
+                break
+            best = better
     return best
 
 
@@ -105,11 +159,12 @@ def _placed(mesh: trimesh.Trimesh, face: Face, offset: np.ndarray) -> trimesh.Tr
     return trimesh.Trimesh((mesh.vertices - mean_face()[BRIDGE]) @ turn.T + bridge, mesh.faces, process=False)
 
 
-def _pressed(mask, size, mesh, thickness, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
-    """The stock `size` (refined `mesh`, template frame) seated at `offset` (2,) mm and pressed."""
+def _pressed(size, refined_mesh: tuple, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
+    """The stock `size` (`refined_mesh`: (mesh, thickness), template frame) seated at `offset` (2,) mm and pressed."""
+    mesh, thickness = refined_mesh
     rim = find_rim(_placed(mesh, face, offset), face.scan, face.registered, face.axis, face.up, thickness=thickness)
     at_most = fit_rim(rim, face, params.flange_mm, COMFORT_N, fit_params)
     seal = at_most.seal_force_n
     if seal is None or seal * MARGIN > COMFORT_N:
         return StockFit(size, tuple(offset), at_most, False)
-    return StockFit(size, tuple(offset), fit_rim(rim, face, params.flange_mm, seal * MARGIN, fit_params), True)
+    return StockFit(size, tuple(offset), fit_rim(rim, face, params.flange_mm, seal * MARGIN, fit_params, sealing=seal), True)

@@ -33,9 +33,9 @@ def test_demo_runs_every_stage_and_points_to_the_report(cli, tmp_path):
     assert Image.open(tmp_path / "template_regions.png").size == (640, 480)
     assert (tmp_path / "design" / "cushion.stl").is_file() and (tmp_path / "design" / "registration_residual.png").is_file()
     report = tmp_path / "design" / "report.html"
-    assert f"report: {report}" in out and "custom at" in out and "generic at" in out and "L/min" in out
+    assert f"report: {report}" in out and "custom at" in out and "stock " in out and "L/min" in out
     page = report.read_text()
-    assert 'data-key="headgear_force_n"' in page and 'data-key="generic.pressure_cv"' in page
+    assert 'data-key="headgear_force_n"' in page and 'data-key="stock.pressure_cv"' in page
 
 
 def test_phantom_command_writes_a_capture(cli, tmp_path):

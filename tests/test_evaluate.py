@@ -292,12 +292,13 @@ def test_tissue_over_the_nasal_bones_is_stiffest():
     assert (k.effective < k.tissue).all() and (k.effective < FitParams().tissue.cushion_kpa_per_mm).all()  # springs in series
 
 
-def test_custom_cushion_seals_evenly_where_the_generic_does_not(designed):
-    """Issue 6 on synthetic subjects at 10 cmH2O and the recommended headgear force."""
+def test_custom_cushion_seals_evenly_where_the_best_stock_size_does_not(designed):
+    """At 10 cmH2O, the custom cushion at its recommended force and the best stock size at the
+    force a clinic sets: the custom one presses evenly, the stock one (a shape that is no one's) not."""
     _, d = designed
-    custom, generic = d.fits["custom"].summary(), d.fits["generic"].summary()
+    custom, stock = d.fits["custom"].summary(), d.fits["stock"].summary()
     assert custom["leak_l_min"] <= 1.0 and custom["window_fraction"] >= 0.95
-    assert generic["pressure_cv"] >= 2 * custom["pressure_cv"] or generic["leak_l_min"] > custom["leak_l_min"]
+    assert stock["pressure_cv"] >= 2 * custom["pressure_cv"]
     assert custom["seal_force_n"] <= d.fits["custom"].force_n  # seals at the force it recommends
 
 

@@ -67,7 +67,7 @@ def test_every_picture_is_there_of_its_size_and_not_blank(report):
 def test_rim_colours_follow_the_pressure_and_open_stretches_are_dark(designed1):
     scan, d = designed1
     rims = evaluated_rims(d)
-    rim = rims["generic"]
+    rim = rims["stock"]
     sim = d.alignment.similarity
     shot = shoot(Face(scan.vertices, scan.faces), seal_view(sim, rim.points))
     scale = pressure_scale(rims, d.fit_params.window_kpa)
@@ -157,8 +157,8 @@ def test_report_html_in_headless_chromium_offline(report, tmp_path):
     assert errors == []
     assert resources == []  # nothing fetched: everything is inline
     keys = {k for k, _, _ in shown}
-    assert {"headgear_force_n", "custom.pressure_max_kpa", "generic.leak_l_min", "custom.window_fraction",
-            "cushion.min_wall_mm", "states.2.custom.leak_l_min", "states.7.generic.pressure_max_kpa"} <= keys
+    assert {"headgear_force_n", "custom.pressure_max_kpa", "stock.leak_l_min", "stock.headgear_force_n", "custom.window_fraction",
+            "cushion.min_wall_mm", "states.2.custom.leak_l_min", "states.7.stock.pressure_max_kpa"} <= keys
     shown_numbers_match(shown, fit)
     skin = (np.abs(shot - [217, 192, 173]).max(axis=2) < 60).mean()  # the face, shaded
     green = ((shot[..., 1] > shot[..., 0] + 30) & (shot[..., 1] > shot[..., 2])).mean()  # the custom cushion, in the window

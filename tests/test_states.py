@@ -107,12 +107,13 @@ def test_each_state_gives_what_pressing_the_moved_cushion_onto_its_face_gives():
 
 
 def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, placed_subjects):
-    """The design records each state of its mask, the custom and the generic cushion in each; the
+    """The design records each state of its mask, the custom and the best stock cushion in each; the
     custom cushion moved 10 mm sideways leaks over 5 L/min (the model does not seal everything)."""
     ph, d = designed
     mask = d.contact.mask
     assert [s.state for s in d.states] == list(sleep_states(mask)) and not any(s.error for s in d.states)
-    assert all(set(s.fits) == {"custom", "generic"} for s in d.states)
+    assert all(set(s.fits) == {"custom", "stock"} for s in d.states)
+    assert all(s.fits["stock"].force_n == d.stock.best.fit.force_n for s in d.states)  # the stock at the force set for it
     assert max(s.state.mouth_open_mm for s in d.states) == {"nasal": 6.0, "oronasal": 13.0}[mask]
     _, scan, _ = placed_subjects(ph.seed)
     far = FaceState("10 mm off", shift_mm=10.0)
@@ -125,8 +126,8 @@ def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, place
 def test_the_design_line_says_in_how_many_states_each_cushion_leaks():
     from cpapfit.cli import asleep_summary
 
-    row = lambda name, custom, generic: {"name": name, "custom": {"leak_l_min": custom}, "generic": {"leak_l_min": generic}}  # noqa: E731
+    row = lambda name, custom, stock: {"name": name, "custom": {"leak_l_min": custom}, "stock": {"leak_l_min": stock}}  # noqa: E731
     fit = {"states": [row("awake", 0.0, 9.0), row("a", 0.5, 3.0), row("b", 12.0, 1.0), {"name": "c", "error": "no skin"}]}
     assert asleep_summary(fit) == ("asleep: custom leaks over 2 L/min in 1 of 2 (worst: b, 12.0 L/min); "
-                                   "generic leaks over 2 L/min in 1 of 2 (worst: a, 3.0 L/min)")
+                                   "stock leaks over 2 L/min in 1 of 2 (worst: a, 3.0 L/min)")
     assert asleep_summary({}) == "asleep: not evaluated"

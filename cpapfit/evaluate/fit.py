@@ -49,6 +49,9 @@ class FitParams:
                 "window_mmhg": [round(lo * MMHG_PER_KPA, 2), round(hi * MMHG_PER_KPA, 2)], "target_kpa": self.target_kpa}
 
 
+CUSHIONS = ("custom", "stock", "generic")  # the cushions a fit record may hold, in the order they are shown
+
+
 @dataclass(frozen=True)
 class CushionFit:
     """One cushion pressed onto the face at `force_n` N of headgear.
@@ -91,6 +94,7 @@ class CushionFit:
             "window_fraction": float(((p >= lo) & (p <= hi)).mean()),
             "leak_l_min": float(self.leak_l_min[c].sum()),
             "seal_force_n": self.seal_force_n,
+            "headgear_force_n": round(self.force_n, 3),
             "rim_covered_fraction": float(c.mean()),
             "gap_before_load_median_mm": float(np.median(gap)),
             "gap_before_load_max_mm": float(gap.max()),
@@ -168,15 +172,17 @@ def fit_cushion(cushion: trimesh.Trimesh, face: Face, width_mm: float, force_n: 
     return fit_rim(find_rim(cushion, face.scan, face.registered, face.axis, face.up), face, width_mm, force_n, params)
 
 
-def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams()) -> CushionFit:
-    """`fit_cushion` of a cushion whose contact line on this face is `rim`."""
+def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams(),
+            sealing: float | None = None) -> CushionFit:
+    """`fit_cushion` of a cushion whose contact line on this face is `rim`; `sealing`: its seal
+    force (N) where already known (it does not depend on `force_n`), else found here."""
     k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
     pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)
     c = rim.covered
     opening = _left_open(pressed, rim, params.cpap_kpa)
     leak = leak_l_min(opening, rim.ds[c], width_mm, params.cpap_kpa)
-    sealing = seal_force(rim, k.effective, width_mm, params)
+    sealing = seal_force(rim, k.effective, width_mm, params) if sealing is None else sealing
     full = [_spread(c, a) for a in (pressed.pressure_kpa, opening, leak)]
     return CushionFit(rim, k, *full, pressed, force, sealing, width_mm, params.window_kpa)
 

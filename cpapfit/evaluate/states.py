@@ -162,15 +162,16 @@ class StateFit:
 
 def fit_states(
     cushions: dict[str, trimesh.Trimesh], face: Face, states: tuple[FaceState, ...], width_mm: float, force_n: float,
-    params: FitParams = FitParams(), awake: dict[str, CushionFit] | None = None,
+    params: FitParams = FitParams(), awake: dict[str, CushionFit] | None = None, thickness: dict[str, np.ndarray] | None = None,
 ) -> tuple[StateFit, ...]:
     """Every cushion of `cushions` (name -> mesh, mm, scan frame) pressed onto each of `states` of
     `face` at the awake headgear force `force_n` N; `width_mm` the seal flange width. Each cushion is
     refined once, and states that differ only in pressure share their contact lines, those of the
     `awake` fits of the same cushions on this face where given: the numbers are `fit_cushion`'s of
-    the moved cushion on the state's face."""
+    the moved cushion on the state's face. `thickness`: {name: (V,) mm} of cushions already `refined`."""
     motion = motions(np.asarray(face.registered.vertices))
-    fine = {name: refined(mesh) for name, mesh in cushions.items()}  # name -> (mesh, thickness)
+    thickness = thickness or {}
+    fine = {name: (mesh, thickness[name]) if name in thickness else refined(mesh) for name, mesh in cushions.items()}
     rims = {(name, False, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
     out = []
     for state in states:

@@ -43,13 +43,15 @@ def mould_record(drafts: dict) -> dict:
 
 
 def evaluation_record(fits: dict, params: FitParams) -> dict:
-    """The evaluate stage's part of fit.json: custom (and generic) cushions at one headgear force."""
+    """The evaluate stage's part of fit.json: the custom cushion at its recommended headgear force,
+    each other cushion (generic, stock) at its own (its `headgear_force_n`)."""
     custom = fits["custom"]
     return {
         "cpap_cmh2o": params.cpap_cmh2o,
         "headgear_force_n": round(custom.force_n, 3),
         "headgear_force_about": "recommended: the force at which a cushion compensated for this face presses every covered rim "
-                                "point with the target pressure while balancing the CPAP load; every cushion here is evaluated at it",
+                                "point with the target pressure while balancing the CPAP load; the custom cushion is evaluated at it, "
+                                "a stock cushion at the force a clinic sets for it (stock_fitting)",
         "window": params.describe(),
         **{name: fit.summary() for name, fit in fits.items()},
         "tissue_model": params.tissue.describe(),
@@ -73,12 +75,13 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
     }
 
 
-STATE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region", "seal_force_n", "rim_covered_fraction", "lifted_off")
+STATE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region", "seal_force_n", "headgear_force_n",
+              "rim_covered_fraction", "lifted_off")
 
 
 def states_record(fits: dict, states: tuple, cpap_cmh2o: float) -> list[dict]:
     """fit.json's `states`: awake (the `fits`) and each `StateFit`, every cushion's leak, window,
-    peak pressure and where, at the awake headgear force (`cpap_cmh2o`: the awake pressure)."""
+    peak pressure and where, each at its awake headgear force (`cpap_cmh2o`: the awake pressure)."""
     rows = [(AWAKE, fits, "")] + [(s.state, s.fits, s.error) for s in states]
     return [_state_row(state, by_cushion, error, cpap_cmh2o) for state, by_cushion, error in rows]
 
@@ -117,10 +120,11 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         },
         **evaluation_record(d.fits, d.fit_params),
         "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
-        "states_about": "the face asleep (`cpapfit.evaluate.states`): the jaw dropped (the ICT model's jawOpen carried onto this "
-                        "face), the mask pushed across its axis or rolled by a pillow, the CPAP range's ends; every state at "
-                        "the awake headgear force; the custom cushion's membrane is sized so that it seals in each "
-                        "(`cpapfit.envelope`)",
+        "stock_fitting": d.stock.record(),
+        "states_about": "the face asleep (`cpapfit.evaluate.states`): lying on the back with the jaw dropped (the ICT model's "
+                        "jawOpen carried onto this face), the mask pushed across its axis or rolled by a pillow, the CPAP "
+                        "range's ends; each cushion at its awake headgear force; the custom cushion's membrane is sized so that "
+                        "it seals in each (`cpapfit.envelope`); stock: the best stock size as a clinic fits it (stock_fitting)",
         "parameters": dict(vars(d.cushion.params)),
     }
     return {

@@ -40,7 +40,7 @@ class Provenance:
 
 
 def evaluated_rims(d: Design) -> dict:
-    """{"custom" | "generic": RimFit} from the design's evaluation: the rim's place on the skin, the gap
+    """{"custom" | "stock": RimFit} from the design's evaluation: the rim's place on the skin, the gap
     before load (the custom one's without its pre-load, i.e. its shape's fit), pressure and openings."""
     return {name: rim_fit(fit, d.preload_at(fit.rim.points) if name == "custom" else 0.0) for name, fit in d.fits.items()}
 
@@ -88,7 +88,7 @@ def gap_pictures(shot, similarity, mask: str, rims: dict, fit: dict) -> list[Pic
     titles = {n: f"{n}: gap median {np.nanmedian(r.gap_mm):.1f} mm, {100 * np.nanmean(r.gap_mm > 1.0):.0f} % over 1 mm" for n, r in rims.items()}
     arrays = {n: (r.points, r.gap_mm, None) for n, r in rims.items()}
     return [
-        Picture("rim_gap.png", "Gap under the rim, custom vs generic",
+        Picture("rim_gap.png", f"Gap under the rim, {' vs '.join(rims)}",
                 "Each cushion pushed onto the face as a rigid body until its rim first touches the skin; colour: the gap left "
                 "between rim and skin (the custom cushion's shape, before its pressure-compensating pre-load). Before the skin "
                 "gives, so larger gaps mean more headgear force to close them.",
@@ -100,7 +100,7 @@ def gap_pictures(shot, similarity, mask: str, rims: dict, fit: dict) -> list[Pic
 
 
 def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple, fit: dict) -> list[Picture]:
-    """Contact pressure maps, pressure along the rim, and leak locations, custom vs generic."""
+    """Contact pressure maps, pressure along the rim, and leak locations, of each rim of `rims`."""
     scale = pressure_scale(rims, window_kpa)
     arrays = {n: (r.points, np.asarray(r.pressure_kpa), np.asarray(r.open, dtype=bool)) for n, r in rims.items()}
     in_window = {n: f"{n}: {100 * (lookup(fit, f'{n}.window_fraction') or 0):.0f} % of the rim in the window, "
@@ -110,7 +110,7 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
              for n, r in rims.items()}
     lo, hi = window_kpa
     return [
-        Picture("rim_pressure.png", "Contact pressure on the rim, custom vs generic",
+        Picture("rim_pressure.png", f"Contact pressure on the rim, {' vs '.join(rims)}",
                 f"Green: inside the safe window ({lo:.1f}-{hi:.1f} kPa: enough to seal against the CPAP pressure, below the "
                 "pressure that closes skin capillaries); blue: too little to seal reliably; orange to red: above the limit, "
                 "risk of pressure sores; near-black: no contact.",

@@ -1,5 +1,6 @@
 """report.html: one self-contained page (pictures inline, plotly.js inline, no network) that a
-clinician reads at a glance: warnings, custom vs generic numbers, the 3-D view, the pictures, all
+clinician reads at a glance: warnings, the custom cushion's numbers beside the stock cushion's, the
+3-D view, the pictures, all
 numbers of fit.json with units, and where the result came from.
 
 Every number taken from fit.json is shown in an element with data-key (its path in fit.json) and
@@ -9,6 +10,8 @@ import base64
 import html
 from dataclasses import dataclass
 
+from ..evaluate.fit import CUSHIONS
+
 
 # key suffix -> (unit, display factor, decimals)
 UNITS = (
@@ -16,7 +19,7 @@ UNITS = (
     ("_cmh2o", "cmH₂O", 1.0, 1), ("_force_n", "N", 1.0, 1), ("_l_min", "L/min", 1.0, 2), ("_cv", "", 1.0, 3),
     ("_deg", "°", 1.0, 1), ("_mm2", "mm²", 1.0, 0),
 )
-HEADLINE = (  # (key under fit["custom"|"generic"], label)
+HEADLINE = (  # (key under fit["custom"|"stock"|"generic"], label)
     ("contact_fraction", "rim in contact with the skin"),
     ("window_fraction", "rim within the safe pressure window"),
     ("pressure_mean_kpa", "mean contact pressure"),
@@ -24,11 +27,11 @@ HEADLINE = (  # (key under fit["custom"|"generic"], label)
     ("pressure_max_kpa", "peak contact pressure"),
     ("pressure_max_mmhg", "peak contact pressure"),
     ("leak_l_min", "leak at the set CPAP pressure"),
+    ("headgear_force_n", "headgear force (custom: recommended; stock: as a clinic sets it)"),
     ("seal_force_n", "least headgear force that seals"),
     ("gap_before_load_median_mm", "rim-to-skin gap before load, median (custom: with its pre-load)"),
     ("rim_covered_fraction", "rim over scanned skin (the numbers above are over this part)"),
 )
-CUSHIONS = ("custom", "generic")
 
 
 @dataclass(frozen=True)
@@ -85,17 +88,31 @@ def lookup(fit: dict, path: str):
     return node
 
 
+def cushions_in(fit: dict) -> list[str]:
+    """The cushions the record evaluates (`CUSHIONS` present), in order."""
+    return [c for c in CUSHIONS if isinstance(fit.get(c), dict)]
+
+
+def cushion_label(fit: dict, name: str) -> str:
+    """A cushion's column heading: the stock cushion with its size and how it was chosen."""
+    if name != "stock":
+        return f"{name} cushion"
+    stock = fit.get("stock_fitting", {})
+    how = "best size by fit" if "sizes_best_first" in stock else "size as evaluated"
+    return f"stock cushion, size {stock.get('size', '?')} ({how}; the gauge picks {stock.get('gauge_size', '?')})"
+
+
 def headline_table(fit: dict) -> str:
-    """Custom vs generic: the evaluation's numbers (those present)."""
-    body = []
+    """The custom cushion beside the cushions it is compared with: the evaluation's numbers (those present)."""
+    cushions, body = cushions_in(fit), []
     for key, label in HEADLINE:
-        paths = [f"{c}.{key}" for c in CUSHIONS]
+        paths = [f"{c}.{key}" for c in cushions]
         if lookup(fit, paths[0]) is None:
             continue
         cells = "".join(value_cell(p, lookup(fit, p)) for p in paths)
         body.append(f"<tr><th>{html.escape(label)}</th>{cells}<td>{html.escape(unit_of(key)[0])}</td></tr>")
-    head = "<tr><th></th><th>custom cushion</th><th>generic cushion</th><th>unit</th></tr>"
-    return f'<table class="headline"><thead>{head}</thead><tbody>{"".join(body)}</tbody></table>'
+    head = "".join(f"<th>{html.escape(cushion_label(fit, c))}</th>" for c in cushions)
+    return f'<table class="headline"><thead><tr><th></th>{head}<th>unit</th></tr></thead><tbody>{"".join(body)}</tbody></table>'
 
 
 def settings_line(fit: dict) -> str:
@@ -133,7 +150,7 @@ def states_table(fit: dict) -> str:
     """Each state of the sleeping face (fit.json's `states`): every cushion's leak, window fraction,
     peak pressure and where; empty when the record has no states."""
     states = fit.get("states") or []
-    cushions = [c for c in CUSHIONS if any(c in row for row in states)]
+    cushions = [c for c in cushions_in(fit) if any(c in row for row in states)]
     if not cushions:
         return ""
     head = "".join(f"<th>{c}: {label} ({unit_of(key)[0]})</th>" for c in cushions for key, label in STATE_COLUMNS)
@@ -144,9 +161,10 @@ def states_table(fit: dict) -> str:
         note = f"<br><small>not evaluated: {html.escape(row['error'])}</small>" if "error" in row else ""
         body.append(f"<tr><th>{html.escape(row['name'])}{note}</th>{cells}</tr>")
     head += "".join(f"<th>{c}: peak where</th>" for c in cushions)
-    return ("<h2>Asleep: the same cushions in each state of the sleeping face</h2>\n<p>The jaw dropped, the mask pushed "
-            "sideways or rolled by a pillow, and the CPAP range's ends, each at the headgear force set awake. A leak of more "
-            "than a few L/min, or a peak over the window's top, is where a cushion fails the sleeping face.</p>\n"
+    return ("<h2>Asleep: the same cushions in each state of the sleeping face</h2>\n<p>Lying on the back with the jaw "
+            "dropped, the mask pushed sideways or rolled by a pillow, and the CPAP range's ends, each cushion at the headgear "
+            "force set for it awake. A leak of more than a few L/min, or a peak over the window's top, is where a cushion "
+            "fails the sleeping face.</p>\n"
             f'<table class="states"><thead><tr><th>state</th>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>')
 
 
@@ -202,12 +220,12 @@ def report_html(page: Page) -> bytes:
 <h1>{html.escape(page.title)}</h1>
 <p class="sub">cpapfit report. All lengths in millimetres; pressures in kPa (1 kPa = 7.5 mmHg = 10.2 cmH₂O).</p>
 {notices_block(page.notices)}
-<h2>At a glance: custom vs generic cushion</h2>
+<h2>At a glance: {html.escape(" vs ".join(cushions_in(page.fit)))} cushion</h2>
 {settings_line(page.fit)}
 {headline_table(page.fit)}
 {states_table(page.fit)}
 <h2>3-D view</h2>
-<p>Drag to turn, scroll to zoom, hover over a rim for its value. The buttons show the custom cushion or the generic cushion's rim.</p>
+<p>Drag to turn, scroll to zoom, hover over a rim for its value. The buttons show the custom cushion or the other cushion's rim.</p>
 <div id="viewer-box">{page.viewer}</div>
 <h2>Pictures</h2>
 {pictures}

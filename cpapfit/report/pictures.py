@@ -29,7 +29,8 @@ ON_SCAN, OFF_SCAN = "#1f78b4", "#e31a1c"
 SEALED, OPEN = "#1a9850", "#d73027"
 OPEN_RGB = np.array([20, 20, 20], dtype=np.uint8)
 NO_DATA_RGB = np.array([150, 150, 150], dtype=np.uint8)
-LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "generic": {"color": "#e08214", "linestyle": "--"}}
+COMPARED_STYLE = {"color": "#e08214", "linestyle": "--"}
+LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "stock": COMPARED_STYLE, "generic": COMPARED_STYLE}
 
 
 def _rgb(hex_colour: str) -> np.ndarray:
@@ -128,7 +129,7 @@ def leak_picture(shot: Shot, rims: dict, titles: dict) -> bytes:
 def profile_picture(similarity: Similarity, mask: str, rims: dict, ylabel: str, heading: str, window: tuple | None = None,
                     mmhg: bool = False) -> bytes:
     """PNG: values along each rim of {name: (points (K, 3) mm, values (K,), open (K,) bool or None)}
-    against the position around the seal, custom vs generic; a window (lo, hi) kPa shaded; open
+    against the position around the seal, custom vs stock (or generic); a window (lo, hi) kPa shaded; open
     stretches marked; a mmHg axis beside kPa if `mmhg`."""
     fig = Figure(figsize=(9.0, 4.2), dpi=100, layout="constrained")
     ax = fig.subplots()

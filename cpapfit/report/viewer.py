@@ -61,7 +61,7 @@ def _mesh(face: Face, similarity: Similarity, centre: np.ndarray, **style) -> go
 
 def viewer_figure(face: Face, cushion: Face, rims: dict, scale: ColourScale, similarity: Similarity, axis: np.ndarray) -> go.Figure:
     """Face, custom cushion (coloured by the custom rim's values) and each rim of {name: (points (K, 3) mm,
-    values (K,))}, with buttons to show the custom or generic cushion's rim."""
+    values (K,))}, with buttons to show the custom cushion or the other cushion's rim (stock or generic)."""
     centre = np.vstack([p for p, _ in rims.values()]).mean(axis=0)
     colours = {"colorscale": colourscale(scale), "cmin": scale.lo, "cmax": scale.hi}
     custom_points, custom_values = rims["custom"]
@@ -77,7 +77,8 @@ def viewer_figure(face: Face, cushion: Face, rims: dict, scale: ColourScale, sim
         traces.append(go.Scatter3d(**_upright(loop, similarity, centre), mode="lines", name=f"{name} rim",
                                    line={"width": 9, "color": vals, **colours}, customdata=vals,
                                    hovertemplate=f"{name} rim: %{{customdata:.2f}}<extra></extra>"))
-    shown = {"custom cushion": [True, True, True, False], "generic rim": [True, False, False, True], "both rims": [True, False, True, True]}
+    other = next(name for name in rims if name != "custom")
+    shown = {"custom cushion": [True, True, True, False], f"{other} rim": [True, False, False, True], "both rims": [True, False, True, True]}
     buttons = [{"label": label, "method": "restyle", "args": [{"visible": vis}]} for label, vis in shown.items()]
     for trace, visible in zip(traces, shown["custom cushion"]):
         trace.visible = visible
