@@ -39,7 +39,7 @@ from cpapfit.ict import load_ict, template_truth
 from cpapfit.ict.phantom import ict_head_mesh, random_subject
 from cpapfit.phantom import open_mouth
 from cpapfit.pipeline import design, evaluated_cushions, place_template
-from cpapfit.stock_fit import fitted_stock, placed_stock
+from cpapfit.stock_fit import compared_stock, placed_stock
 from cpapfit.template import MASKS, load_template
 from ict_bench import ict_arguments, model_source, scan_of
 
@@ -87,8 +87,8 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool)
     predicted = {AWAKE.name: d.fits} | {s.state.name: s.fits for s in d.states}
     faces = {(False, 0.0): face_of(*head(seed, source, 0.0, jaw), d.cushion.axis, d.cushion.up)}
     if stock:  # the best stock size, seated on the true face as a clinic seats it, at its own force
-        fitted = fitted_stock(mask, "best", faces[(False, 0.0)], fit_params=d.fit_params)
-        row["stock"] = fitted.record("")
+        fitted = compared_stock(mask, faces[(False, 0.0)], fit_params=d.fit_params, asleep=False).best
+        row["stock"] = {"size": fitted.size, **fitted.record()}
         pressed["stock"] = (*placed_stock(mask, fitted, faces[(False, 0.0)]), fitted.fit.force_n)
     states = []
     for state in (AWAKE, *sleep_states(mask), FAR):

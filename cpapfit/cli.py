@@ -33,7 +33,7 @@ from .progress import batch_display, stage_display
 from .pipeline import Alignment, evaluate, evaluated_cushions, face_for, missing_stages, place_template, stage_table
 from .report.pictures import template_regions_picture
 from .scan import Scan
-from .stock_fit import fitted_stock, gauge_size, stock_states
+from .stock_fit import compared_stock
 from .template import load_template
 
 EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
@@ -182,17 +182,17 @@ def cmd_evaluate(args) -> int:
     face = face_for(scan, placed.alignment, placed.registration)
     cushions = evaluated_cushions(placed.alignment, cushion, args.mask if args.generic else None)
     fits = evaluate(face, cushions, fit_params=params, force_n=args.force)
-    stock = fitted_stock(args.mask, args.stock, face, fit_params=params) if args.stock else None
-    fits |= {"stock": stock.fit} if stock else {}
+    stock = compared_stock(args.mask, face, args.stock, fit_params=params, asleep=args.states) if args.stock else None
+    fits |= {"stock": stock.best.fit} if stock else {}
     record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
               **evaluation_record(fits, params)}
     if stock:
-        record["stock_fitting"] = stock.record(gauge_size(args.mask, placed.registration.vertices))
+        record["stock_fitting"] = stock.record()
     if args.states:
         width = CushionParams().flange_mm
         states = fit_states(cushions, face, sleep_states(args.mask), width, fits["custom"].force_n, params, fits)
         if stock:  # the stock cushion at the force the clinic set for it
-            states = tuple(map(merged, states, stock_states(args.mask, stock, face, fit_params=params)))
+            states = tuple(map(merged, states, stock.states))
         record["states"] = states_record(fits, states, params.cpap_cmh2o)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")

@@ -209,7 +209,7 @@ def design(
     al, reg, by_shape = placement.alignment, placement.registration, placement.by_shape
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
-    stock = submit(compared_stock, mask, face, params, fit_params)
+    stock = submit(compared_stock, mask, face, "best", params, fit_params)
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
     on_stage("cushion")
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)

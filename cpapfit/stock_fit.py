@@ -42,12 +42,10 @@ class StockFit:
     fit: CushionFit
     sealed: bool
 
-    def record(self, gauge: str) -> dict:
-        """How it was fitted, for fit.json (`gauge`: the gauge's size for this face)."""
-        return {"size": self.size, "gauge_size": gauge, "seat_offset_mm": [round(float(v), 3) for v in self.offset_mm],
-                "headgear_force_n": round(self.fit.force_n, 3), "sealed_within_comfort": self.sealed, "comfort_max_n": COMFORT_N,
-                "fitted": "seated on the nasal bridge and slid across the mask axis to its best seat; the headgear set "
-                          f"{MARGIN:g} times the force that seals it, at most the comfort maximum"}
+    def record(self) -> dict:
+        """Its seat, force and whether it sealed within COMFORT_N, for fit.json."""
+        return {"seat_offset_mm": [round(float(v), 3) for v in self.offset_mm], "headgear_force_n": round(self.fit.force_n, 3),
+                "sealed_within_comfort": self.sealed}
 
     def rank(self) -> tuple:
         """Smaller is better: sealed first, then the peak pressure (sealed) or the leak (not)."""
@@ -57,9 +55,9 @@ class StockFit:
 
 @dataclass(frozen=True)
 class StockComparison:
-    """The stock cushion a clinic would fit on a face, to set beside the custom one: every size at
-    its best seat (`sizes`, best first), the size the gauge picks, and the best size pressed in
-    each sleep state (`sleep_states`) at the force the clinic set for it."""
+    """The stock cushion a clinic would fit on a face, to set beside the custom one: the sizes
+    tried, each at its best seat (`sizes`, best first), the size the gauge picks, and the best size
+    pressed in each sleep state (`sleep_states`) at the force the clinic set for it (or none)."""
 
     sizes: tuple[StockFit, ...]
     gauge: str
@@ -71,19 +69,26 @@ class StockComparison:
 
     def record(self) -> dict:
         """fit.json's `stock_fitting`: how the best size was fitted, and every size tried."""
-        tried = {f.size: {"seat_offset_mm": [round(float(v), 3) for v in f.offset_mm], "headgear_force_n": round(f.fit.force_n, 3),
-                          "sealed_within_comfort": f.sealed, **{k: f.fit.summary()[k] for k in SIZE_KEYS}} for f in self.sizes}
-        return self.best.record(self.gauge) | {"sizes_best_first": tried}
+        tried = {f.size: f.record() | {k: f.fit.summary()[k] for k in SIZE_KEYS} for f in self.sizes}
+        return {"size": self.best.size, "gauge_size": self.gauge, **self.best.record(), "comfort_max_n": COMFORT_N,
+                "fitted": "seated on the nasal bridge and slid across the mask axis to its best seat; the headgear set "
+                          f"{MARGIN:g} times the force that seals it, at most the comfort maximum",
+                "sizes_best_first": tried}
 
 
 SIZE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region")
 
 
-def compared_stock(mask: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockComparison:
-    """Every stock size of `mask` seated on `face`, the gauge's pick, and the best size in each sleep state."""
-    sizes = tuple(best_stock(mask, face, params, fit_params).values())
+def compared_stock(mask: str, face: Face, choice: str = "best", params: CushionParams = CushionParams(),
+                   fit_params: FitParams = FitParams(), asleep: bool = True) -> StockComparison:
+    """The stock cushion of `mask` a clinic would fit on `face`: `choice` a size, "gauge" (the size
+    the gauge picks) or "best" (every size seated, the best kept); `asleep`: pressed in each sleep state too."""
     gauge = gauge_size(mask, np.asarray(face.registered.vertices))
-    return StockComparison(sizes, gauge, stock_states(mask, sizes[0], face, params, fit_params))
+    if choice == "best":
+        sizes = tuple(best_stock(mask, face, params, fit_params).values())
+    else:
+        sizes = (seated(mask, gauge if choice == "gauge" else choice, face, params, fit_params),)
+    return StockComparison(sizes, gauge, stock_states(mask, sizes[0], face, params, fit_params) if asleep else ())
 
 
 def stock_states(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams(),
@@ -132,15 +137,6 @@ def seated(mask: str, size: str, face: Face, params: CushionParams = CushionPara
 def _refined_stock(mask: str, size: str, params: CushionParams) -> tuple[trimesh.Trimesh, np.ndarray]:
     """The stock solid refined for finding its rim, and its vertices' thickness (`rim.refined`)."""
     return refined(stock_cushion(mask, size, params)[1])
-
-
-def fitted_stock(mask: str, choice: str, face: Face, params: CushionParams = CushionParams(),
-                 fit_params: FitParams = FitParams()) -> StockFit:
-    """The stock cushion a clinic would fit: `choice` a size, "gauge" (the gauge's size) or "best" (every size tried)."""
-    if choice == "best":
-        return next(iter(best_stock(mask, face, params, fit_params).values()))
-    size = gauge_size(mask, np.asarray(face.registered.vertices)) if choice == "gauge" else choice
-    return seated(mask, size, face, params, fit_params)
 
 
 def placed_stock(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams()) -> tuple[trimesh.Trimesh, np.ndarray]:
