@@ -19,8 +19,7 @@ from .evaluate.fit import CUSHIONS, FitParams
 from .evaluate.states import fit_states, merged, sleep_states
 from .io import load_scan
 from .io.cushion import load_cushion
-from .io.landmarks import landmarks_record
-from .io.design import evaluation_record, registration_ply, states_record
+from .io.design import registration_ply
 from .io.phantom import write_head_mesh, write_phantom
 from .io.summary import counts, summary_csv, summary_html
 from .io.units import UNIT_CHOICES
@@ -30,7 +29,8 @@ from .landmarks.types import Landmarks
 from .ict.phantom import ict_head_mesh, make_ict_phantom
 from .phantom import make_phantom
 from .progress import batch_display, stage_display
-from .pipeline import Alignment, evaluate, evaluated_cushions, face_for, missing_stages, place_template, stage_table
+from .records import evaluate_record, landmarks_file_record
+from .pipeline import Alignment, evaluate, evaluated_cushions, face_for, place_template
 from .report.pictures import template_regions_picture
 from .scan import Scan
 from .stock_fit import compared_stock
@@ -184,16 +184,13 @@ def cmd_evaluate(args) -> int:
     fits = evaluate(face, cushions, fit_params=params, force_n=args.force)
     stock = compared_stock(args.mask, face, args.stock, fit_params=params, asleep=args.states) if args.stock else None
     fits |= {"stock": stock.best.fit} if stock else {}
-    record = {"cpapfit_version": __version__, "units": "mm", "source": scan.source, "cushion": str(args.cushion),
-              **evaluation_record(fits, params)}
-    if stock:
-        record["stock_fitting"] = stock.record()
+    states = None
     if args.states:
         width = CushionParams().flange_mm
         states = fit_states(cushions, face, sleep_states(args.mask), width, fits["custom"].force_n, params, fits)
         if stock:  # the stock cushion at the force the clinic set for it
             states = tuple(map(merged, states, stock.states))
-        record["states"] = states_record(fits, states, params.cpap_cmh2o)
+    record = evaluate_record(scan, str(args.cushion), fits, params, stock, states)
     write_bytes(Path(args.out), json_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")
     for row in record.get("states", [])[1:]:
@@ -238,9 +235,8 @@ def cmd_demo(args) -> int:
     summaries["export"] = f"{len(run.files)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
     summaries["evaluate"] = fit_summary(fit)
     summaries["report"] = f"report.html and {sum(name.endswith('.png') for name in run.files)} pictures in {out / 'design'}"
-    for stage in stage_table(summaries):
-        print(f"  {stage.name:<11} {'built    ' if stage.built else 'NOT BUILT'}  {stage.summary}")
-    print(f"stages not built yet: {', '.join(missing_stages()) or 'none'}.")
+    for stage, summary in summaries.items():  # in the pipeline's order
+        print(f"  {stage:<11} {summary}")
     print(report_summary(out / "design", fit))
     return 0
 
@@ -281,16 +277,7 @@ def cmd_landmarks(args) -> int:
     """The landmarks and similarity a design would use (detected ones far from the registered face dropped)."""
     scan = load_scan(Path(args.scan), args.units)
     al = place_template(scan, load_user_landmarks(args, scan)).alignment
-    fit = al.similarity
-    record = landmarks_record(al.landmarks) | {
-        "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),
-                       "landmark_rms_mm": fit.rms_mm, "note": "template (mm) -> scan (mm): x -> scale * R x + t"},
-        "face_check": {"coverage": al.check.coverage, "median_gap_mm": al.check.median_gap_mm, "nose_above_sides_mm": al.check.ridge_mm,
-                       "nose_above_lip_mm": al.check.below_mm,
-                       "turned_from_camera_deg": None if np.isnan(al.check.turned_deg) else al.check.turned_deg},
-        "source": str(args.scan), "scan_units": scan.units,
-    }
-    write_bytes(Path(args.out), json_bytes(record))
+    write_bytes(Path(args.out), json_bytes(landmarks_file_record(al, scan)))
     info(f"{scan.units_note}; {found_by(al.landmarks)} -> {args.out}")
     return 0
 

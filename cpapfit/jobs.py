@@ -32,6 +32,7 @@ from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files
 from .landmarks.types import Landmarks
 from .pipeline import Design, design
+from .records import manifest_record
 from .scan import Scan
 from .template import load_template
 from .work import at_once
@@ -174,7 +175,7 @@ def run_scan(task: ScanTask) -> ScanResult:
 def _result(name: str, status: str, fit: dict, seconds: float) -> ScanResult:
     """A summary row from fit.json's leak, window fraction and warnings, where present."""
     custom = fit.get("custom", {})
-    warnings = [str(w) for w in fit.get("warnings", [])] + (["rescan advised"] if fit.get("rescan_advised") else [])
+    warnings = [w["message"] for w in fit.get("warnings", [])] + (["rescan advised"] if fit.get("rescan_advised") else [])
     return ScanResult(name, status, seconds, custom.get("leak_l_min"), custom.get("window_fraction"), tuple(warnings))
 
 
@@ -215,11 +216,9 @@ def _design_folder(task: ScanTask, stamp: Callable[[], dict], landmarks_path=Non
     staging.mkdir(parents=True)
     try:
         run = design_job(task.scan, staging, task.mask, landmarks_path, task.units, on_stage, parallel)
-        manifest = {
-            "cpapfit_version": __version__, "scan": str(task.scan), "files": list(run.files),
-            "parameters": {"mask": task.mask, "units": task.units, "landmarks": None if landmarks_path is None else str(landmarks_path)},
-        }
-        write_bytes(staging / MANIFEST, json_bytes(manifest | stamp()))
+        landmarks = None if landmarks_path is None else str(landmarks_path)
+        manifest = manifest_record(str(task.scan), run.files, task.mask, task.units, landmarks, stamp())
+        write_bytes(staging / MANIFEST, json_bytes(manifest))
         _replace_folder(staging, task.out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)

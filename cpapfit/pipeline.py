@@ -33,37 +33,9 @@ from .stock_fit import StockComparison, compared_stock
 from .template import load_template
 from .work import at_once
 
-# (stage, issue that builds it); order is the pipeline's.
-STAGES = (
-    ("scan", None), ("template", None), ("landmarks", 3), ("similarity", 3), ("nonrigid", 4),
-    ("contact", 5), ("cushion", 5), ("export", 5), ("evaluate", 6), ("report", 7),
-)
 STRAY_MM = QualityParams().detected_spread_refuse_mm  # detected landmarks this far (median) from the registered face: dropped
 DOUBT_MM = QualityParams().cross_check_spread_mm  # ... this far: cross-checked against the face's shape alone
 APART_MM = QualityParams().shape_apart_drop_mm  # ... and their seal band this far (mean) from the shape's: dropped
-BUILT = {"scan", "template", "landmarks", "similarity", "nonrigid", "contact", "cushion", "export", "evaluate", "report"}
-
-
-@dataclass(frozen=True)
-class StageStatus:
-    """Whether a pipeline stage is built, and what it did on the last run (one line)."""
-
-    name: str
-    built: bool
-    summary: str
-
-
-def missing_stages() -> list[str]:
-    """Names of the stages not built yet, in pipeline order."""
-    return [name for name, _ in STAGES if name not in BUILT]
-
-
-def stage_table(summaries: dict[str, str]) -> list[StageStatus]:
-    """Every stage in order with its summary, or "not built yet (issue N)"."""
-    return [
-        StageStatus(name, name in BUILT, summaries.get(name, "") if name in BUILT else f"not built yet (issue {issue})")
-        for name, issue in STAGES
-    ]
 
 
 @dataclass(frozen=True)

@@ -3,11 +3,10 @@ on the nasal bridge and slid across the mask axis to where it seals best, the he
 until it seals (and MARGIN more), up to COMFORT_N.
 
 Seating: the stock cushion (`cushion.stock`, template frame) is turned into the face's frame (its
-axis and up) and put with its nasal-bridge point on the registered template's; then walked across
-the axis as a clinician slides it: from the bridge, the four seats SEAT_STEPS_MM[0] away up, down
-and to either side are tried and the best taken, until none is better; then the same in steps of
-SEAT_STEPS_MM[1]; never further than SEAT_REACH_MM from the bridge. A seat that seals at no more
-than COMFORT_N is better than one that does not; among those that seal, the lower peak pressure
+axis and up) and put with its nasal-bridge point on the registered template's; then moved across
+the axis on a 3 x 3 grid SEAT_STEPS_MM[0] apart and again SEAT_STEPS_MM[1] apart around the best
+(17 seats; a compass walk from the bridge tries fewer but settles on worse seats, `bench/RESULTS.md`).
+A seat that seals at no more than COMFORT_N is better than one that does not; among those that seal, the lower peak pressure
 at the force that seals them is better; among those that do not, the lower leak at COMFORT_N.
 The best size is the best seat of every size so judged.
 """
@@ -27,8 +26,7 @@ from .evaluate.states import StateFit, fit_states, sleep_states
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals
 SEAT_STEPS_MM = (2.0, 1.0)
-SEAT_REACH_MM = 4.0  # a stock cushion is seated on the nasal bridge: slid at most this far from it
-COMPASS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+GRID = np.stack(np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]), axis=-1).reshape(-1, 2)
 
 
 @dataclass(frozen=True)
@@ -122,14 +120,12 @@ def seated(mask: str, size: str, face: Face, params: CushionParams = CushionPara
             tried[key] = _pressed(size, mesh, face, offset, params, fit_params)
         return tried[key]
 
-    best = at(np.zeros(2))
+    best, centre = None, np.zeros(2)
     for step in SEAT_STEPS_MM:
-        while True:
-            seats = [o for o in np.asarray(best.offset_mm) + step * COMPASS if np.linalg.norm(o) <= SEAT_REACH_MM + 1e-9]
-            better = min(map(at, seats), key=StockFit.rank)
-            if better.rank() >= best.rank():
-                break
-            best = better
+        for offset in centre + step * GRID:
+            trial = at(offset)
+            best = trial if best is None or trial.rank() < best.rank() else best
+        centre = np.asarray(best.offset_mm)
     return best
 
 

@@ -14,6 +14,7 @@ import pytest
 import trimesh
 from distributed import LocalCluster
 
+from records import written
 from cpapfit.batch import find_scans
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.summary import summary_csv, summary_html
@@ -69,10 +70,10 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     assert "bad.ply" in err and "3 scans: 2 designed, 0 unchanged, 1 failed" in err and "Traceback" not in err
     for name in ("p1", "p2"):
         assert rows[name]["status"] == "designed" and rows[name]["error"] == "" and float(rows[name]["time (s)"]) > 1
-        manifest = json.loads((out / name / "manifest.json").read_text())
+        manifest = written(out / name / "manifest.json")
         assert manifest["hash"] == content_hash(ScanTask(inp / name, out / name, "nasal"))
         assert all((out / name / f).stat().st_size > 0 for f in manifest["files"])
-        assert json.loads((out / name / "fit.json").read_text())["mask"] == "nasal"
+        assert written(out / name / "fit.json")["mask"] == "nasal"
         assert trimesh.load(out / name / "cushion.stl").is_watertight
     assert not (out / "bad").exists() and hidden(out) == []
     page = (out / "batch_report.html").read_text()
@@ -134,7 +135,8 @@ def test_kept_outputs_give_their_fit_numbers_and_changed_input_that_fails_remove
     scan.write_text("ply\nnot really\n")
     task = ScanTask(scan, tmp_path / "out" / "face")
     task.out.mkdir(parents=True)
-    fit = {"custom": {"leak_l_min": 1.234, "window_fraction": 0.875}, "warnings": ["thin bridge"], "rescan_advised": True}
+    fit = {"custom": {"leak_l_min": 1.234, "window_fraction": 0.875}, "warnings": [{"code": "hole_mm", "message": "thin bridge"}],
+           "rescan_advised": True}
     (task.out / "fit.json").write_text(json.dumps(fit))
     (task.out / "manifest.json").write_text(json.dumps({"hash": content_hash(task), "files": ["fit.json"]}))
     row = run_scan(task)

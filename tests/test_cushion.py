@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from records import written
 from cpapfit.contact import onto_scan, template_curve
 from cpapfit.cushion.nurbs import AROUND, ROWS
 from cpapfit.export import threemf_bytes
@@ -67,7 +68,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--verbose", "--out", out)
     assert code == 0, err
     assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
-    manifest = json.loads((out / "manifest.json").read_text())
+    manifest = written(out / "manifest.json")
     names = {p.name for p in out.iterdir()} - {"manifest.json"}
     assert set(manifest["files"]) == names and manifest["parameters"]["mask"] == "oronasal"
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
@@ -75,14 +76,14 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
                      "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png",
                      "rim_pressure.png", "rim_pressure_profile.png", "leak.png", "states_pressure.png"}
     assert f"report: {out / 'report.html'}" in err
-    curve = json.loads((out / "contact_curve.json").read_text())
+    curve = written(out / "contact_curve.json")
     pts = np.array(curve["points"])
     assert curve["units"] == "mm" and pts.shape[1] == 3
     steps = np.linalg.norm(np.diff(np.vstack([pts, pts[:1]]), axis=0), axis=1)
     assert steps.max() < 5 * np.median(steps)  # ordered around a closed loop: no jumps, first joins last
     stl = trimesh.load(out / "cushion.stl")
     assert stl.is_watertight
-    fit = json.loads((out / "fit.json").read_text())
+    fit = written(out / "fit.json")
     assert fit["units"] == "mm" and fit["mask"] == "oronasal" and fit["cushion"]["watertight"]
     for key in ("cpap_cmh2o", "headgear_force_n", "custom", "stock", "stock_fitting", "tissue_model", "cpapfit_version"):
         assert key in fit
@@ -90,7 +91,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     code, _, err = cli("evaluate", phantom1_dir, "--cushion", out / "cushion.stl", "--mask", "oronasal", "--states", "--stock", "gauge",
                        "--out", evaluated)
     assert code == 0, err
-    again = json.loads(evaluated.read_text())  # the written STL, evaluated alone, gives design's numbers
+    again = written(evaluated, "fit")  # the written STL, evaluated alone, gives design's numbers
     assert set(again) >= {"cpap_cmh2o", "headgear_force_n", "custom", "tissue_model", "states"} and "generic" not in again
     assert again["headgear_force_n"] == pytest.approx(fit["headgear_force_n"], abs=0.01)
     for key in ("pressure_mean_kpa", "pressure_max_kpa", "leak_l_min"):

@@ -11,6 +11,7 @@ from PIL import Image
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from records import written
 from cpapfit.align.check import nose_peak
 from cpapfit.align.initial import initial_alignment
 from cpapfit.errors import InputError
@@ -153,7 +154,7 @@ def test_user_landmarks_override_detection(rotated_stl, tmp_path, cli):
     (tmp_path / "lm.json").write_text(json.dumps({"points": (surface[idx] / 1000.0).tolist(), "template_index": idx}))
     code, _, err = cli("landmarks", path, "--landmarks", tmp_path / "lm.json", "--out", tmp_path / "out.json")
     assert code == 0, err
-    out = json.loads((tmp_path / "out.json").read_text())
+    out = written(tmp_path / "out.json", "landmarks")
     assert out["path"] == "user" and out["template_index"] == idx
     np.testing.assert_allclose(out["points"], surface[idx], atol=1e-3)  # metres in, mm out
 
@@ -567,7 +568,7 @@ def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, 
 
     monkeypatch.setattr(pipeline, "align", stray)
     code, _, err = cli("landmarks", phantom1_dir, "--out", tmp_path / "lm.json")
-    record = json.loads((tmp_path / "lm.json").read_text())
+    record = written(tmp_path / "lm.json", "landmarks")
     assert code == 0 and record["path"] == "fallback" and "from their places on the registered face" in record["rejected"], err
 
 

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from records import written
 from cpapfit.align.initial import DISAGREE_MM
 from cpapfit.cli import main
 from cpapfit.io import load_scan
@@ -90,7 +91,7 @@ def test_a_design_needs_no_network(twice):
 
 def test_a_clean_subject_trips_no_gate(twice):
     code, err, out = twice[0]["plain"]
-    fit = json.loads((out / "fit.json").read_text())
+    fit = written(out / "fit.json")
     assert code == 0 and fit["rescan_advised"] is False and fit["warnings"] == []
     q = fit["quality"]
     assert q["coverage"] > GATES.coverage_flag and q["hole_mm"] < GATES.hole_flag_mm
@@ -102,7 +103,7 @@ def test_a_clean_subject_trips_no_gate(twice):
 def test_a_clean_subject_has_its_true_proportions(twice, phantom1):
     """Size and depth for breadth as the generator made them (its overall scale, and the face's width
     and height stretched; its local changes of nose and chin move the depth ratio by up to ~0.07)."""
-    q = json.loads((twice[0]["plain"][2] / "fit.json").read_text())["quality"]
+    q = written(twice[0]["plain"][2] / "fit.json")["quality"]
     p = phantom1.identity
     breadth = np.sqrt(p["face_width"] * p["face_height"])
     assert q["face_size"] == pytest.approx(p["scale"] * breadth, abs=0.03)
@@ -114,7 +115,7 @@ def design_flags(tmp_path, ph, *extra) -> tuple[list[str], str]:
     write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
     code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out", *extra)
     assert code == 0, err
-    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    fit = written(tmp_path / "out" / "fit.json")
     assert fit["rescan_advised"] is True and "rescan advised" in err
     return [w["code"] for w in fit["warnings"]], err
 
@@ -128,9 +129,9 @@ def test_a_misstated_focal_length_is_flagged(tmp_path, phantom1, twice):
     """Intrinsics whose focal length is 1.3 times too long (another camera's, or another resolution's)
     make the face 1.3 times too narrow and short for its depth, and the mask as much too small; the
     shape fits as well as ever, so only the face's proportions tell: flagged, saying what to check."""
-    clean = json.loads((twice[0]["plain"][2] / "fit.json").read_text())["quality"]
+    clean = written(twice[0]["plain"][2] / "fit.json")["quality"]
     codes, err = design_flags(tmp_path, with_intrinsics(phantom1, 1.3))
-    q = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
+    q = written(tmp_path / "out" / "fit.json")["quality"]
     assert codes and set(codes) <= {"depth_ratio", "face_size"} and "intrinsics (fx, fy)" in err, err
     assert q["face_size"] / clean["face_size"] == pytest.approx(1 / 1.3, abs=0.03)
     assert 1.15 < q["depth_ratio"] / clean["depth_ratio"] < 1.3
@@ -142,7 +143,7 @@ def test_a_misstated_depth_scale_is_flagged(tmp_path, phantom1):
     stated = dataclasses.replace(phantom1, sensor=dataclasses.replace(phantom1.sensor, depth_scale=phantom1.sensor.depth_scale * 1.35))
     codes, err = design_flags(tmp_path, stated)
     assert codes == ["face_size"] and "check the capture's depth scale" in err, err
-    q = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
+    q = written(tmp_path / "out" / "fit.json")["quality"]
     p = phantom1.identity
     assert q["face_size"] == pytest.approx(p["scale"] * np.sqrt(p["face_width"] * p["face_height"]) / 1.35, abs=0.03)
 
@@ -178,7 +179,7 @@ def test_landmarks_off_along_the_skin_are_flagged_and_not_trusted(tmp_path, phan
     (tmp_path / "lm.json").write_text(json.dumps({"points": truth.nearest.on_surface(moved)[0].tolist(), "template_index": idx.tolist()}))
     codes, err = design_flags(tmp_path, phantom1, "--landmarks", tmp_path / "lm.json")
     assert codes == ["landmark_spread_mm"], err
-    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    fit = written(tmp_path / "out" / "fit.json")
     assert fit["registration"]["landmark_weight_factor"] == pytest.approx(0.1)
     assert fit["quality"]["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
 
@@ -192,7 +193,7 @@ def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
     codes, err = design_flags(tmp_path, with_colour_shift(phantom1, 12))
     assert {"landmark_spread_mm", "landmark_free"} & set(codes), err
     assert "colour image may not line up with the depth" in err, err
-    quality = json.loads((tmp_path / "out" / "fit.json").read_text())["quality"]
+    quality = written(tmp_path / "out" / "fit.json")["quality"]
     assert quality.get("landmark_spread_mm", np.inf) > GATES.detected_spread_flag_mm  # none recorded once they are dropped
 
 
@@ -216,7 +217,7 @@ def test_a_capture_without_colour_is_designed_from_the_shape_and_flagged(tmp_pat
     write_files(tmp_path / "capture", capture_files(phantom1.image, phantom1.depth_raw, phantom1.intrinsics, phantom1.sensor.depth_scale))
     (tmp_path / "capture" / "color.png").unlink()
     code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out")
-    fit = json.loads((tmp_path / "out" / "fit.json").read_text())
+    fit = written(tmp_path / "out" / "fit.json")
     assert code == 0 and fit["landmarks"]["path"] == "fallback", err
     assert [w["code"] for w in fit["warnings"]] == ["landmark_free"] and "no face was detected" in err
     assert "the capture has no colour image: add color.png" in err

@@ -116,12 +116,9 @@ def headline_table(fit: dict) -> str:
 
 
 def settings_line(fit: dict) -> str:
-    """The recommended headgear force and the CPAP pressure, or that they are not evaluated yet."""
-    force, cpap = fit.get("headgear_force_n"), fit.get("cpap_cmh2o")
-    if force is None:
-        return '<p class="force">Recommended headgear force: <b>not evaluated yet</b> (the pressure and leak evaluation is not built).</p>'
-    cpap_text = f" at a CPAP pressure of {value_cell('cpap_cmh2o', cpap, 'b')} cmH₂O" if cpap is not None else ""
-    return f'<p class="force">Recommended headgear force: {value_cell("headgear_force_n", force, "b")} N{cpap_text}.</p>'
+    """The custom cushion's recommended headgear force and the CPAP pressure."""
+    force = value_cell("headgear_force_n", fit["headgear_force_n"], "b")
+    return f'<p class="force">Recommended headgear force: {force} N at a CPAP pressure of {value_cell("cpap_cmh2o", fit["cpap_cmh2o"], "b")} cmH₂O.</p>'
 
 
 def flatten(record: dict, prefix: str = "") -> list[tuple[str, object]]:

@@ -1,0 +1,156 @@
+"""Every JSON record cpapfit writes, built here from the stages' results, each with
+SCHEMA_VERSION; the JSON Schema of each file is `cpapfit/schemas/<name>.schema.json`
+(`schemas.schema`). All lengths mm, pressures kPa, forces N, flows L/min, in the scan's frame."""
+
+import numpy as np
+
+from . import __version__
+from .draft import MIN_DRAFT_DEG
+from .evaluate.fe import SILICONE_KPA, SILICONE_POISSON
+from .evaluate.fit import FitParams
+from .evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
+from .evaluate.membrane import BAND_MM, MEMBRANE_MAX_MM
+from .evaluate.states import AWAKE
+from .io.landmarks import landmarks_record
+from .pipeline import Alignment, Design
+from .scan import Scan
+from .schemas import SCHEMA_VERSION
+from .stock_fit import StockComparison
+
+
+def mask_dimensions(d: Design) -> dict:
+    """Width (across the face), height (along the head) and depth (along the mask axis) in mm."""
+    axis, up = d.cushion.axis, d.cushion.up
+    side = np.cross(up, axis)
+    v = d.solid.vertices
+    return {f"{k}_mm": round(float(np.ptp(v @ a)), 2) for k, a in (("width", side), ("height", up), ("depth", axis))}
+
+
+def mould_record(drafts: dict) -> dict:
+    """The casting mould's part of fit.json: each part's demoulding draft, and what it means."""
+    return {
+        **{name: d.record() for name, d in drafts.items()},
+        "draft_about": f"draft of each part's moulding surface along its pull direction; below {MIN_DRAFT_DEG:g} deg it drags, "
+                       "below 0 it is an undercut: measured, not removed (demoulding relies on the cured silicone flexing "
+                       "out of undercuts; the parting plane is flat and the walls are not tapered)",
+    }
+
+
+def evaluation_record(fits: dict, params: FitParams) -> dict:
+    """The evaluate stage's part of fit.json: the custom cushion at its recommended headgear force,
+    each other cushion (generic, stock) at its own (its `headgear_force_n`)."""
+    custom = fits["custom"]
+    return {
+        "cpap_cmh2o": params.cpap_cmh2o,
+        "headgear_force_n": round(custom.force_n, 3),
+        "headgear_force_about": "recommended: the force at which a cushion compensated for this face presses every covered rim "
+                                "point with the target pressure while balancing the CPAP load; the custom cushion is evaluated at it, "
+                                "a stock cushion at the force a clinic sets for it (stock_fitting)",
+        "window": params.describe(),
+        **{name: fit.summary() for name, fit in fits.items()},
+        "tissue_model": params.tissue.describe(),
+        "mechanics": {
+            "model": "rigid mask on an elastic foundation; equilibrium of force along the mask axis and moments across it; "
+                     "contact band = seal flange width; gaps and indentations along the axis, pressures normal to the skin",
+            "contact_width_mm": custom.contact_width_mm,
+            "pressure_stats_over": "rim points over scanned skin (rim_covered_fraction of the rim); zero where not in contact",
+        },
+        "leak_model": {
+            "model": "seal open where contact pressure < CPAP pressure, opening (P - p) / k; flow = min(lubrication h^3 dP ds / "
+                     "(12 mu L), orifice Cd h ds sqrt(2 dP / rho)), L = seal flange width",
+            "air_viscosity_pa_s": AIR_VISCOSITY_PA_S, "air_density_kg_m3": AIR_DENSITY_KG_M3, "discharge_coefficient": DISCHARGE_COEFFICIENT,
+        },
+        "membrane_model": {
+            "model": "a flap thinner than the wall (found on the cushion mesh by its thickness) closes the seal opening at a rim "
+                     "point up to its reach: the lesser of its width less the sealing band and its cantilever deflection under "
+                     "the CPAP pressure, P w^4 / (8 D), D = E t^3 / (12 (1 - nu^2)); none where the mask lifts off",
+            "band_mm": BAND_MM, "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
+        },
+    }
+
+
+STATE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region", "seal_force_n", "headgear_force_n",
+              "rim_covered_fraction", "lifted_off")
+
+
+def states_record(fits: dict, states: tuple, cpap_cmh2o: float) -> list[dict]:
+    """fit.json's `states`: awake (the `fits`) and each `StateFit`, every cushion's leak, window,
+    peak pressure and where, each at its awake headgear force (`cpap_cmh2o`: the awake pressure)."""
+    rows = [(AWAKE, fits, "")] + [(s.state, s.fits, s.error) for s in states]
+    return [_state_row(state, by_cushion, error, cpap_cmh2o) for state, by_cushion, error in rows]
+
+
+def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
+    """One state's row of fit.json's `states`."""
+    row = {"name": state.name, "parameters": state.parameters(cpap_cmh2o)}
+    row |= {name: {k: v for k, v in fit.summary().items() if k in STATE_KEYS} for name, fit in fits.items()}
+    return row | ({"error": error} if error else {})
+
+
+def design_record(d: Design, scan: Scan) -> dict:
+    """fit.json of `cpapfit design`."""
+    reg = d.registration
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "cpapfit_version": __version__, "units": "mm", "source": scan.source, "scan_units": scan.units,
+        "mask": d.contact.mask,
+        **d.quality.record(),  # rescan_advised, warnings, quality
+        "landmarks": {"path": d.alignment.landmarks.path, "count": len(d.alignment.landmarks.points), "note": d.alignment.landmarks.note,
+                      "rejected": d.alignment.landmarks.rejected},
+        "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
+                         "residual_median_mm": float(np.median(reg.residual[reg.valid])),
+                         "landmark_weight_factor": reg.landmark_factor, "start": reg.start,
+                         "bending_mm2": round(reg.bending, 3),
+                         "landmark_spread_mm": None if np.isnan(reg.landmark_spread_mm) else round(reg.landmark_spread_mm, 3)},
+        "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
+        "cushion": {**mask_dimensions(d), **d.checks},
+        "fit_before_compression": d.rim.summary(),
+        "mould": mould_record(d.mould_draft),
+        "pressure_compensation": {
+            "target_kpa": d.fit_params.target_kpa,
+            "preload_mm": {k: round(float(f(d.preload.mm)), 3) for k, f in (("min", np.min), ("median", np.median), ("max", np.max))},
+            "preload_smoothing_samples": d.preload.smoothing,
+            "about": "the rim is set into the skin along the mask axis by more where the tissue is soft, so that at the "
+                     "recommended headgear force it presses evenly",
+        },
+        **evaluation_record(d.fits, d.fit_params),
+        "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
+        "stock_fitting": d.stock.record(),
+        "states_about": "the face asleep (`cpapfit.evaluate.states`): lying on the back with the jaw dropped (the ICT model's "
+                        "jawOpen carried onto this face), the mask pushed across its axis or rolled by a pillow, the CPAP "
+                        "range's ends; each cushion at its awake headgear force; the custom cushion's membrane is sized so that "
+                        "it seals in each (`cpapfit.envelope`); stock: the best stock size as a clinic fits it (stock_fitting)",
+        "parameters": dict(vars(d.cushion.params)),
+    }
+
+
+def evaluate_record(scan: Scan, cushion_file: str, fits: dict, params: FitParams, stock: StockComparison | None,
+                    states: tuple | None) -> dict:
+    """fit.json of `cpapfit evaluate`: the cushion in `cushion_file` (and any compared) pressed onto `scan`."""
+    record = {"schema_version": SCHEMA_VERSION, "cpapfit_version": __version__, "units": "mm", "source": scan.source,
+              "scan_units": scan.units, "cushion_file": cushion_file, **evaluation_record(fits, params)}
+    record |= {"stock_fitting": stock.record()} if stock else {}
+    return record | ({"states": states_record(fits, states, params.cpap_cmh2o)} if states is not None else {})
+
+
+def contact_curve_record(d: Design) -> dict:
+    """contact_curve.json: the seal curve, a closed loop in order."""
+    return {"schema_version": SCHEMA_VERSION, "units": "mm", "mask": d.contact.mask, "points": np.round(d.contact.curve, 4).tolist()}
+
+
+def landmarks_file_record(al: Alignment, scan: Scan) -> dict:
+    """The landmarks file of `cpapfit landmarks`: the landmarks a design would use, the similarity and the face check."""
+    fit, check = al.similarity, al.check
+    return {"schema_version": SCHEMA_VERSION, **landmarks_record(al.landmarks),
+            "similarity": {"scale": fit.scale, "rotation": fit.rotation.tolist(), "translation_mm": fit.translation.tolist(),
+                           "landmark_rms_mm": fit.rms_mm, "note": "template (mm) -> scan (mm): x -> scale * R x + t"},
+            "face_check": {"coverage": check.coverage, "median_gap_mm": check.median_gap_mm, "nose_above_sides_mm": check.ridge_mm,
+                           "nose_above_lip_mm": check.below_mm,
+                           "turned_from_camera_deg": None if np.isnan(check.turned_deg) else check.turned_deg},
+            "source": scan.source, "scan_units": scan.units}
+
+
+def manifest_record(scan: str, files: tuple, mask: str, units: str, landmarks: str | None, stamp: dict) -> dict:
+    """manifest.json of a design folder: the scan, the files written, the settings (and a batch's `stamp`)."""
+    return {"schema_version": SCHEMA_VERSION, "cpapfit_version": __version__, "scan": scan, "files": list(files),
+            "parameters": {"mask": mask, "units": units, "landmarks": landmarks}, **stamp}

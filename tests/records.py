@@ -1,0 +1,17 @@
+"""A JSON file cpapfit wrote, read and validated against the schema the package ships for it."""
+
+import json
+from pathlib import Path
+
+import jsonschema
+
+from cpapfit.schemas import schema
+
+BY_FILE = {"fit.json": "fit", "manifest.json": "manifest", "contact_curve.json": "contact_curve"}
+
+
+def written(path: Path, name: str | None = None) -> dict:
+    """The record in `path`, valid under `cpapfit/schemas/<name>.schema.json` (`name` from the file name if not given)."""
+    record = json.loads(Path(path).read_text())
+    jsonschema.validate(record, schema(name or BY_FILE[Path(path).name]), format_checker=jsonschema.FormatChecker())
+    return record
