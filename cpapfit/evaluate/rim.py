@@ -1,7 +1,8 @@
 """Where a cushion meets the face: its contact line, found from the cushion's own mesh.
 
 The cushion (any triangle mesh in the scan frame: the designed solid, an STL from elsewhere, a
-stock cushion) is refined to ~1 mm edges; every vertex looks down the mask axis for the skin.
+stock cushion) is refined to ~1 mm edges; every vertex of its wall near the face end (at most
+RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin.
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
 pushed on. Evaluating the written mesh (not the design's internal curve) means `design` and
@@ -29,6 +30,7 @@ FACE_MM = 4.0  # scanned skin farther than this behind the registered face along
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
 MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
+RIM_BAND_MM = 15.0  # a rim point is a wall vertex at most this far up the axis from its sector's lowest
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
@@ -87,13 +89,15 @@ def find_rim(
     direction; `thickness`: given, the cushion is already `refined` and this is its (V,) thickness mm."""
     fine, thickness = refined(cushion) if thickness is None else (cushion, thickness)
     vertices = fine.vertices
-    on_face, face_cos = _height_over(vertices, face_mesh, np.broadcast_to(axis, vertices.shape), REACH_MM)
     plane = in_plane(axis, up)
     uv = (vertices - vertices.mean(axis=0)) @ plane.T
     sector = np.minimum((np.arctan2(uv[:, 1], uv[:, 0]) + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
+    near = _rim_band(vertices @ axis, sector, thickness > MEMBRANE_MAX_MM, sectors)  # the membrane is not the rim
+    on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
+    on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
     level = np.round(np.nan_to_num(on_face, nan=np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
     order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
-    order = order[thickness[order] > MEMBRANE_MAX_MM]  # the membrane is not the rim
+    order = order[near[order]]
     first = order[np.unique(sector[order], return_index=True)[1]]  # least clearance in each sector
     if len(first) < sectors or not np.isfinite(on_face[first]).all():
         raise InputError("the cushion does not run all the way round the mask axis over the face")
@@ -109,6 +113,15 @@ def find_rim(
     cos = _skin_cos(skin, scan, axis)
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
     return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
+
+
+def _rim_band(height: np.ndarray, sector: np.ndarray, wall: np.ndarray, sectors: int) -> np.ndarray:
+    """(V,) bool: the `wall` vertices at most RIM_BAND_MM above the lowest wall vertex of their
+    sector (`height` (V,) mm along the axis): where a rim can be (higher up, the skin would be
+    inside the cushion's wall), the only vertices that look for the skin."""
+    low = np.full(sectors, np.inf)
+    np.minimum.at(low, sector[wall], height[wall])
+    return wall & (height - low[sector] <= RIM_BAND_MM)
 
 
 def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
