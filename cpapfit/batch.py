@@ -73,12 +73,13 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
 
 def run_batch(
     scans: dict[str, Path], out_dir: Path, mask: str = "nasal", workers: int | None = None,
-    scheduler: str | None = None, on_result: Callable[[ScanResult], None] = lambda row: None,
+    scheduler: str | None = None, on_result: Callable[[ScanResult], None] = lambda row: None, stock: str | None = "best",
 ) -> list[ScanResult]:
     """Every scan through `design` on a Dask cluster, outputs in `out_dir`/<name>; the rows in name
-    order. Leftovers of a killed run are removed first; `on_result(row)` is called as each scan ends."""
+    order. Leftovers of a killed run are removed first; `on_result(row)` is called as each scan ends.
+    `stock`: the stock cushion each design is compared with (`pipeline.design`)."""
     clean_leftovers(out_dir)
-    tasks = [ScanTask(path.resolve(), (out_dir / name).resolve(), mask) for name, path in scans.items()]
+    tasks = [ScanTask(path.resolve(), (out_dir / name).resolve(), mask, stock=stock) for name, path in scans.items()]
     rows = []
     with dask_client(workers, scheduler) as client:
         futures = {client.submit(run_scan, task, pure=False): task for task in tasks}

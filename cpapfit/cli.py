@@ -36,6 +36,8 @@ from .scan import Scan
 from .stock_fit import compared_stock
 from .template import load_template
 
+STOCK_HELP = ("the stock cushion to set beside the custom one, fitted as a clinic fits it: best (every size tried; default), "
+              "gauge (the size a sizing gauge picks), a size (S, M, L; nasal also W), or none")
 EXIT_SOME_FAILED = 1  # cpapfit batch: some scans failed (each is a row of the summary)
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
@@ -156,9 +158,17 @@ def report_summary(out: Path, fit: dict) -> str:
     return f"report: {out / 'report.html'} (open it in a browser)\n  {fit_summary(fit)}\n  {asleep_summary(fit)}"
 
 
+def stock_choice(mask: str, choice: str) -> str | None:
+    """A --stock argument checked against the stock sizes of `mask`: a size, "gauge" or "best"; None for "none"."""
+    if choice not in (*SIZES[mask], "gauge", "best", "none"):
+        raise InputError(f"--stock {choice}: the {mask} stock sizes are {', '.join(SIZES[mask])}, or gauge, best or none")
+    return None if choice == "none" else choice
+
+
 def cmd_design(args) -> int:
+    task = ScanTask(Path(args.scan), Path(args.out), args.mask, args.units, stock_choice(args.mask, args.stock))
     with stage_display(args.quiet, args.verbose) as on_stage:
-        run = design_folder(ScanTask(Path(args.scan), Path(args.out), args.mask, args.units), args.landmarks, on_stage, parallel=True)
+        run = design_folder(task, args.landmarks, on_stage, parallel=True)
     info(f"{run.units_note}; {design_summary(run.fit)}; {len(run.files)} files in {args.out}")
     for warning in run.fit.get("warnings", []):
         info(f"rescan advised: {warning['message']}")
@@ -169,8 +179,7 @@ def cmd_design(args) -> int:
 def cmd_evaluate(args) -> int:
     if (args.generic or args.states or args.stock) and not args.mask:
         raise CpapfitError("--generic, --stock and --states need --mask nasal|oronasal: which cushion to compare with, which states to press")
-    if args.stock and args.stock not in (*SIZES[args.mask], "gauge", "best"):
-        raise CpapfitError(f"--stock {args.stock}: the {args.mask} stock sizes are {', '.join(SIZES[args.mask])}, or gauge or best")
+    stock = stock_choice(args.mask, args.stock) if args.stock else None
     if not 0 < args.cpap <= 30:
         raise CpapfitError(f"--cpap {args.cpap:g} cmH2O: CPAP pressures run from about 4 to 20 cmH2O")
     if args.force is not None and not 0 < args.force <= 200:
@@ -182,7 +191,7 @@ def cmd_evaluate(args) -> int:
     face = face_for(scan, placed.alignment, placed.registration)
     cushions = evaluated_cushions(placed.alignment, cushion, args.mask if args.generic else None)
     fits = evaluate(face, cushions, fit_params=params, force_n=args.force)
-    stock = compared_stock(args.mask, face, args.stock, fit_params=params, asleep=args.states) if args.stock else None
+    stock = compared_stock(args.mask, face, stock, fit_params=params, asleep=args.states) if stock else None
     fits |= {"stock": stock.best.fit} if stock else {}
     states = None
     if args.states:
@@ -201,14 +210,14 @@ def cmd_evaluate(args) -> int:
 def cmd_batch(args) -> int:
     from .batch import find_scans, run_batch  # here: Dask takes ~1 s to import, other commands need none of it
 
-    out = Path(args.out)
+    out, stock = Path(args.out), stock_choice(args.mask, args.stock)
     if args.workers is not None and (args.workers < 1 or args.scheduler):
         raise InputError("--workers takes a number >= 1, for the local cluster only (with --scheduler the cluster's workers run)")
     scans, others = find_scans(Path(args.input_dir), out)
     if others:
         info(f"not scans, left out: {', '.join(others)}")
     with batch_display(len(scans), args.quiet) as advance:
-        rows = run_batch(scans, out, args.mask, args.workers, args.scheduler, lambda row: advance(f"{row.name}: {row.status}"))
+        rows = run_batch(scans, out, args.mask, args.workers, args.scheduler, lambda row: advance(f"{row.name}: {row.status}"), stock)
     write_files(out, {"summary.csv": summary_csv(rows), "batch_report.html": summary_html(rows, args.mask)})
     for row in rows:
         if row.status == "failed":
@@ -331,6 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--landmarks", help="landmarks JSON overriding detection (scan units)")
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
+            p.add_argument("--stock", default="best", help=STOCK_HELP)
             add_progress_options(p)
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")
@@ -352,6 +362,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input_dir", help="folder of scans: mesh files and RGB-D capture folders")
     p.add_argument("--out", required=True, help="output folder: one folder per scan, summary.csv, batch_report.html")
     p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
+    p.add_argument("--stock", default="best", help=STOCK_HELP)
     p.add_argument("--workers", type=int, help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (default: a local cluster)")
     p.add_argument("--quiet", action="store_true", help="no progress display")

@@ -96,14 +96,14 @@ def _single_threaded() -> bool:
 
 def design_job(
     scan_path: str | Path, out_dir: str | Path, mask: str = "nasal", landmarks_path: str | Path | None = None,
-    units: str = "auto", on_stage: Callable[[str], None] = _silent, parallel: bool = False,
+    units: str = "auto", on_stage: Callable[[str], None] = _silent, parallel: bool = False, stock: str | None = "best",
 ) -> DesignRun:
     """`cpapfit design`: read the scan (and landmarks), design, build the report, write every file
     atomically to `out_dir`. `parallel`: the mould and some report pictures made in a second process (`worker`)."""
     with worker(parallel) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
-        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit)
+        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock)
         files = design_files(d, scan)
         on_stage("report")
         files |= report_files(d, scan, files, submit)
@@ -121,6 +121,7 @@ class ScanTask:
     out: Path
     mask: str = "nasal"
     units: str = "auto"
+    stock: str | None = "best"  # the stock cushion to compare with (`pipeline.design`)
 
 
 @dataclass(frozen=True)
@@ -148,7 +149,7 @@ def scan_inputs(scan: Path) -> list[Path]:
 
 def content_hash(task: ScanTask) -> str:
     """SHA-256 of the cpapfit version, the parameters and every input file (name, size, bytes)."""
-    h = hashlib.sha256(json_bytes({"cpapfit": __version__, "mask": task.mask, "units": task.units}))
+    h = hashlib.sha256(json_bytes({"cpapfit": __version__, "mask": task.mask, "units": task.units, "stock": task.stock}))
     for path in scan_inputs(task.scan):
         data = path.read_bytes()
         h.update(f"{os.path.relpath(path, task.scan.parent)}\0{len(data)}\0".encode())
@@ -215,9 +216,9 @@ def _design_folder(task: ScanTask, stamp: Callable[[], dict], landmarks_path=Non
     staging = _hidden(task.out, "tmp")
     staging.mkdir(parents=True)
     try:
-        run = design_job(task.scan, staging, task.mask, landmarks_path, task.units, on_stage, parallel)
+        run = design_job(task.scan, staging, task.mask, landmarks_path, task.units, on_stage, parallel, task.stock)
         landmarks = None if landmarks_path is None else str(landmarks_path)
-        manifest = manifest_record(str(task.scan), run.files, task.mask, task.units, landmarks, stamp())
+        manifest = manifest_record(task, run.files, landmarks, stamp())
         write_bytes(staging / MANIFEST, json_bytes(manifest))
         _replace_folder(staging, task.out)
     finally:

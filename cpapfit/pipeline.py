@@ -135,7 +135,7 @@ class Design:
     fits: dict  # {"custom" | "stock": CushionFit}: the custom cushion at its recommended force, the best stock size at its own
     fit_params: FitParams
     states: tuple[StateFit, ...]  # both cushions in each sleep state (`sleep_states`), each at its awake force
-    stock: StockComparison  # the stock cushion a clinic would fit on this face: every size, the gauge's pick
+    stock: StockComparison | None  # the stock cushion a clinic would fit on this face (None: not compared)
 
     def preload_at(self, points: np.ndarray) -> np.ndarray:
         """(K,) mm: the pre-load at the seal-curve point nearest each of (K, 3) `points`."""
@@ -168,20 +168,20 @@ def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage
 def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
     fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
-    placement: Placement | None = None,
+    placement: Placement | None = None, stock: str | None = "best",
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
     cushion onto the face awake and asleep, beside the stock cushion a clinic would fit
-    (`compared_stock`). `on_stage(name)` is called as each stage starts; the stock cushion is
-    fitted by `submit` (`work.py`), alongside the design when that is a worker process's.
+    (`compared_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
+    is called as each stage starts; the stock cushion is fitted by `submit` (`work.py`), alongside
+    the design when that is a worker process's.
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
     placement = placement or place_template(scan, user_landmarks, on_stage)
     al, reg, by_shape = placement.alignment, placement.registration, placement.by_shape
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
-    stock = submit(compared_stock, mask, face, "best", params, fit_params)
     contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
     on_stage("cushion")
     neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
@@ -189,6 +189,7 @@ def design(
     rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
     shape = proportions(load_template().vertices, al.similarity, reg)
     quality = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape))  # or refuse: rescan
+    fitting = submit(compared_stock, mask, face, stock, params, fit_params) if stock else None
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
@@ -198,10 +199,13 @@ def design(
     moulded = checked_mould(cushion, solid)
     fits = evaluate(face, {"custom": solid}, params, fit_params)
     states = fit_states({"custom": solid}, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
-    on_stage("the stock cushion a clinic would fit")
-    stock = stock.result()
+    compared = None
+    if fitting is not None:
+        on_stage("the stock cushion a clinic would fit")
+        compared = fitting.result()
+        fits, states = fits | {"stock": compared.best.fit}, tuple(map(merged, states, compared.states))
     return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload, moulded.parts, moulded.draft,
-                  fits | {"stock": stock.best.fit}, fit_params, tuple(map(merged, states, stock.states)), stock)
+                  fits, fit_params, states, compared)
 
 
 def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):

@@ -115,7 +115,7 @@ def design_record(d: Design, scan: Scan) -> dict:
         },
         **evaluation_record(d.fits, d.fit_params),
         "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
-        "stock_fitting": d.stock.record(),
+        **({"stock_fitting": d.stock.record()} if d.stock else {}),
         "states_about": "the face asleep (`cpapfit.evaluate.states`): lying on the back with the jaw dropped (the ICT model's "
                         "jawOpen carried onto this face), the mask pushed across its axis or rolled by a pillow, the CPAP "
                         "range's ends; each cushion at its awake headgear force; the custom cushion's membrane is sized so that "
@@ -150,7 +150,8 @@ def landmarks_file_record(al: Alignment, scan: Scan) -> dict:
             "source": scan.source, "scan_units": scan.units}
 
 
-def manifest_record(scan: str, files: tuple, mask: str, units: str, landmarks: str | None, stamp: dict) -> dict:
-    """manifest.json of a design folder: the scan, the files written, the settings (and a batch's `stamp`)."""
-    return {"schema_version": SCHEMA_VERSION, "cpapfit_version": __version__, "scan": scan, "files": list(files),
-            "parameters": {"mask": mask, "units": units, "landmarks": landmarks}, **stamp}
+def manifest_record(task, files: tuple, landmarks: str | None, stamp: dict) -> dict:
+    """manifest.json of a design folder: the scan and settings of its `jobs.ScanTask`, the files
+    written, the landmarks file given (and a batch's `stamp`)."""
+    return {"schema_version": SCHEMA_VERSION, "cpapfit_version": __version__, "scan": str(task.scan), "files": list(files),
+            "parameters": {"mask": task.mask, "units": task.units, "stock": task.stock, "landmarks": landmarks}, **stamp}

@@ -62,7 +62,7 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     (inp / "bad.ply").write_bytes(b"ply\nthis is no mesh\n")
     (inp / "notes.txt").write_text("not a scan")
 
-    code, _, err = cli("batch", inp, "--out", out, "--workers", 2)
+    code, _, err = cli("batch", inp, "--out", out, "--workers", 2, "--stock", "gauge")
     assert code == 1, err  # some failed
     rows = summary(out)
     assert sorted(rows) == ["bad", "p1", "p2"]  # notes.txt is no scan
@@ -71,7 +71,8 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     for name in ("p1", "p2"):
         assert rows[name]["status"] == "designed" and rows[name]["error"] == "" and float(rows[name]["time (s)"]) > 1
         manifest = written(out / name / "manifest.json")
-        assert manifest["hash"] == content_hash(ScanTask(inp / name, out / name, "nasal"))
+        assert manifest["hash"] == content_hash(ScanTask(inp / name, out / name, "nasal", stock="gauge"))
+        assert manifest["parameters"]["stock"] == "gauge" and written(out / name / "fit.json")["stock_fitting"]["sizes_best_first"]
         assert all((out / name / f).stat().st_size > 0 for f in manifest["files"])
         assert written(out / name / "fit.json")["mask"] == "nasal"
         assert trimesh.load(out / name / "cushion.stl").is_watertight
@@ -83,7 +84,7 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     before = stamps(out, ["p1", "p2"])
     (inp / "bad.ply").write_bytes(b"")  # still bad, differently: a retry gives the new error
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address)
+        code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address, "--stock", "gauge")
     assert code == 1, err
     rows = summary(out)
     assert [rows[n]["status"] for n in ("bad", "p1", "p2")] == ["failed", "unchanged", "unchanged"]
@@ -93,7 +94,7 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
 
 def test_rerun_after_a_kill_redoes_only_what_was_unfinished(cli, phantoms, tmp_path):
     inp, out, log = scans_folder(phantoms, tmp_path / "in"), tmp_path / "out", tmp_path / "stderr.txt"
-    command = [sys.executable, "-m", "cpapfit", "batch", str(inp), "--out", str(out), "--workers", "1", "--quiet"]
+    command = [sys.executable, "-m", "cpapfit", "batch", str(inp), "--out", str(out), "--workers", "1", "--stock", "none", "--quiet"]
     with open(log, "w") as stderr:
         proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr)
     try:
@@ -109,7 +110,7 @@ def test_rerun_after_a_kill_redoes_only_what_was_unfinished(cli, phantoms, tmp_p
     assert not (out / unfinished).exists() and hidden(out)  # only hidden staging is left of it
     before = stamps(out, [done])
 
-    code, _, err = cli("batch", inp, "--out", out, "--workers", 1)
+    code, _, err = cli("batch", inp, "--out", out, "--workers", 1, "--stock", "none")
     assert code == 0, err
     rows = summary(out)
     assert rows[done]["status"] == "unchanged" and rows[unfinished]["status"] == "designed"
@@ -126,6 +127,7 @@ def test_content_hash_follows_bytes_parameters_and_an_obj_texture(tmp_path):
     first = content_hash(task)
     assert content_hash(task) == first
     assert content_hash(ScanTask(scan, tmp_path / "out" / "face", mask="oronasal")) != first
+    assert content_hash(ScanTask(scan, tmp_path / "out" / "face", stock=None)) != first  # another comparison, another design
     (tmp_path / "skin.png").write_bytes(b"two")
     assert content_hash(task) != first
 

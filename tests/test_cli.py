@@ -198,6 +198,13 @@ def test_evaluate_refuses_bad_cushions_and_options_before_any_work(cli, tmp_path
         assert not out.exists()
 
 
+def test_design_and_batch_refuse_a_stock_size_the_mask_does_not_have(cli, tmp_path, phantom1_dir):
+    for command in ("design", "batch"):
+        out = tmp_path / command
+        assert_one_line_error(*cli(command, phantom1_dir, "--mask", "oronasal", "--stock", "W", "--out", out), "--stock W", "S, M, L")
+        assert not out.exists()
+
+
 def test_an_output_folder_that_is_a_file_is_one_line(cli, tmp_path):
     (tmp_path / "taken").write_text("not a folder")
     assert_one_line_error(*cli("phantom", "--seed", "1", "--out", tmp_path / "taken" / "sub"), "taken")

@@ -231,7 +231,7 @@ def test_a_cheap_camera_far_away_still_gives_a_cushion_on_the_skin(tmp_path):
     off; on other such subjects it crossed itself and the design was refused)."""
     ph = make_phantom(2, KINECT_V1, distance_mm=1000.0)
     write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
-    d = design(load_scan(tmp_path), "nasal")
+    d = design(load_scan(tmp_path), "nasal", stock=None)
     gap = trimesh.proximity.closest_point(trimesh.Trimesh(ph.surface, ph.faces, process=False), d.contact.curve)[1]
     assert np.median(gap) <= 0.5 and gap.max() <= 2.0
 

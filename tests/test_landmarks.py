@@ -528,7 +528,7 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
     assert placed.alignment.landmarks.path == "render" and 5.0 < reg.landmark_spread_mm < 7.0 and by_shape is not None
     assert np.linalg.norm(reg.vertices[band] - truth[band], axis=1).mean() > 2.0
     assert np.linalg.norm(by_shape[band] - truth[band], axis=1).mean() < 1.0
-    gates = {g.code: g for g in design(scan, "oronasal", placement=placed).quality.gates}
+    gates = {g.code: g for g in design(scan, "oronasal", placement=placed, stock=None).quality.gates}
     assert gates["shape_apart_mm"].flag and not gates["landmark_spread_mm"].flag
 
 
@@ -546,7 +546,7 @@ def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape
     al = placed.alignment
     assert al.landmarks.path == "fallback" and placed.by_shape is None
     assert "from their places on the registered face" in al.landmarks.rejected or "placed the mask region a mean" in al.landmarks.rejected
-    d = design(scan, "oronasal", placement=placed)
+    d = design(scan, "oronasal", placement=placed, stock=None)
     assert d.alignment.landmarks.path == "fallback"
     assert np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean() < 1.5
     (gate,) = [g for g in d.quality.flags if g.code == "landmark_free"]

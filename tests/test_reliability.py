@@ -69,7 +69,7 @@ def twice(phantom1_dir, tmp_path_factory):
         for name in ("plain", "offline"):
             out = tmp_path_factory.mktemp(name)
             with no_network(attempts) if name == "offline" else contextlib.nullcontext():
-                runs[name] = (*run_design(phantom1_dir, "--out", out), out)
+                runs[name] = (*run_design(phantom1_dir, "--stock", "gauge", "--out", out), out)  # one stock size: quicker
     return runs, attempts
 
 
@@ -257,7 +257,7 @@ def test_pictures_drawn_in_a_worker_process_are_the_same_bytes(phantom1_dir, mon
     the report drawn in one (a spawned worker: this test process already runs other threads)."""
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # the run date, to the minute, is on the page
     scan = load_scan(phantom1_dir)
-    d = design(scan, "nasal")
+    d = design(scan, "nasal", stock="gauge")
     files = design_files(d, scan)
     alone = report_files(d, scan, files)
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -281,7 +281,7 @@ def test_the_command_with_its_worker_process_gives_the_same_bytes(twice, phantom
     pictures are made in a forked worker, here even if the machine is busy) writes what the
     in-process runs wrote."""
     env = {**os.environ, "SOURCE_DATE_EPOCH": "1700000000"}
-    argv = ["design", str(phantom1_dir), "--out", str(tmp_path), "--quiet"]
+    argv = ["design", str(phantom1_dir), "--stock", "gauge", "--out", str(tmp_path), "--quiet"]
     script = f"import sys, cpapfit.jobs as j; j._idle_core = lambda: True; from cpapfit.cli import main; sys.exit(main({argv!r}))"
     subprocess.run([sys.executable, "-c", script], check=True, env=env, capture_output=True)
     _, _, out = twice[0]["plain"]

@@ -77,9 +77,11 @@ def viewer_figure(face: Face, cushion: Face, rims: dict, scale: ColourScale, sim
         traces.append(go.Scatter3d(**_upright(loop, similarity, centre), mode="lines", name=f"{name} rim",
                                    line={"width": 9, "color": vals, **colours}, customdata=vals,
                                    hovertemplate=f"{name} rim: %{{customdata:.2f}}<extra></extra>"))
-    other = next(name for name in rims if name != "custom")
-    shown = {"custom cushion": [True, True, True, False], f"{other} rim": [True, False, False, True], "both rims": [True, False, True, True]}
-    buttons = [{"label": label, "method": "restyle", "args": [{"visible": vis}]} for label, vis in shown.items()]
+    other = next((name for name in rims if name != "custom"), None)
+    shown = {"custom cushion": [True, True, True, False]}
+    if other:
+        shown |= {f"{other} rim": [True, False, False, True], "both rims": [True, False, True, True]}
+    buttons = [{"label": label, "method": "restyle", "args": [{"visible": vis[:len(traces)]}]} for label, vis in shown.items()]
     for trace, visible in zip(traces, shown["custom cushion"]):
         trace.visible = visible
     fig = go.Figure(traces)
