@@ -1,6 +1,6 @@
 """The finite-element reference and what it says of the fast fit model's springs.
 
-1. Cases with known answers (`cpapfit.evaluate.fe_checks`, fine meshes): plates under pressure, the
+1. Cases with known answers (`cpapfit.evaluation.fe_checks`, fine meshes): plates under pressure, the
    Hertz cylinder, a confined layer.
 2. The skin: each tissue region of the fit model (`tissue.REGIONS`: E, depth over bone) pressed by a
    rigid strip as wide as the seal flange (5 mm), plane strain, Poisson 0.49 (`strip_stiffness`),
@@ -24,9 +24,9 @@ import numpy as np
 from cpapfit import __version__
 from cpapfit.cushion.nurbs import CushionParams
 from cpapfit.errors import CpapfitError
-from cpapfit.evaluate.calibration import section_stiffness, strip_stiffness
-from cpapfit.evaluate.fe_checks import all_checks
-from cpapfit.evaluate.tissue import REGIONS, TissueModel
+from cpapfit.evaluation.calibration import section_stiffness, strip_stiffness
+from cpapfit.evaluation.fe_checks import all_checks
+from cpapfit.evaluation.tissue import REGIONS, TissueModel
 from cpapfit.ict import load_ict
 from cpapfit.ict.phantom import ict_head_mesh
 from cpapfit.io import load_scan

@@ -44,7 +44,7 @@ from cpapfit.ict.phantom import ict_head_mesh, make_ict_phantom, random_subject
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.phantom import FRAMED, to_camera
+from cpapfit.synthetic import FRAMED, to_camera
 from cpapfit.pipeline import design, place_template
 from cpapfit.proportions import proportions
 from cpapfit.template import MASKS, load_template

@@ -21,7 +21,7 @@ from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
 from cpapfit.metrics import mask_region, surface_distance
-from cpapfit.phantom import make_phantom
+from cpapfit.synthetic import make_phantom
 from cpapfit.scan import Scan
 from cpapfit.template import load_template
 

@@ -20,7 +20,7 @@ from cpapfit.io.capture import load_capture
 from cpapfit.io.normals import cloud_normals
 from cpapfit.io.phantom import write_phantom
 from cpapfit.metrics import mask_region
-from cpapfit.phantom import make_phantom
+from cpapfit.synthetic import make_phantom
 from cpapfit.pipeline import design
 from cpapfit.template import load_template
 from landmarks_alignment import as_mesh

@@ -25,7 +25,7 @@ from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit import metrics
 from cpapfit.metrics import mask_region
-from cpapfit.phantom import make_phantom, with_holes
+from cpapfit.synthetic import make_phantom, with_holes
 from cpapfit.pipeline import align
 from cpapfit.template import load_template
 

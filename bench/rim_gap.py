@@ -18,11 +18,11 @@ import numpy as np
 import trimesh
 
 from cpapfit.cushion.nurbs import CushionParams, design_cushion
-from cpapfit.evaluate.gap import rim_gap
-from cpapfit.evaluate.rim import skin_under
+from cpapfit.evaluation.gap import rim_gap
+from cpapfit.evaluation.rim import skin_under
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_phantom
-from cpapfit.phantom import make_phantom
+from cpapfit.synthetic import make_phantom
 from cpapfit.cushion.generic import NOSE_TIP
 from cpapfit.pipeline import design, face_for
 

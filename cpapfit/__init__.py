@@ -1,4 +1,9 @@
-"""cpapfit: a personalised CPAP mask cushion from a facial depth scan."""
+"""cpapfit: a personalised CPAP mask cushion from a facial depth scan.
+
+The public API (`cpapfit.api`, loaded on first use so that the command line starts quickly):
+`load_scan`, `phantom`, `design`, `evaluate`, `Params` (with `CushionParams`, `FitParams`,
+`QualityParams`) and `DesignResult`.
+"""
 
 import os
 
@@ -7,3 +12,13 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 __version__ = "0.2.0"
+__all__ = ["load_scan", "phantom", "design", "evaluate", "Params", "CushionParams", "FitParams", "QualityParams", "DesignResult"]
+
+
+def __getattr__(name: str):
+    """The public API's names, from `cpapfit.api` when first asked for."""
+    if name in __all__:
+        from . import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'cpapfit' has no attribute {name!r}")

@@ -10,7 +10,7 @@ from .contact import Contact
 from .cushion.generic import NOSE_TIP
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet, cushion_solid
-from .evaluate.fit import Face, FitParams, compensating_preload, fit_cushion, refined_preload
+from .evaluation.fit import Face, FitParams, compensating_preload, fit_cushion, refined_preload
 from .export import WALL_TOLERANCE
 from .frozen import freeze_arrays
 

@@ -7,7 +7,7 @@ the states it stays on in (a state that lifts the mask off the face is a matter 
 not of the seal), over the WINDOW sectors beside it, grown by MARGIN_MM and MARGIN_SHARE for the
 prediction's doubt, is the reach its membrane needs, within REACH_MM. The membrane's width is the
 narrowest flap of the cushion's membrane thickness that reaches that far at the lowest CPAP
-pressure (`evaluate.membrane.width_for`), and at most INWARD_SHARE of the width at which it and its
+pressure (`evaluation.membrane.width_for`), and at most INWARD_SHARE of the width at which it and its
 neighbours would meet (where the seal curve bends tightly inwards, beside a nostril, the flaps
 fan out across the bend, `flap_directions`, but still run together). Wherever the
 membrane's sheet still turns back on itself or closes up across the seal (`twisted_columns`),
@@ -23,11 +23,11 @@ from .contact import Contact, closed_resample
 from .cushion.generic import NOSE_TIP
 from .cushion.nurbs import AROUND, Cushion, design_cushion, flap_directions
 from .cushion.solid import with_membrane
-from .evaluate.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
-from .evaluate.membrane import width_for
-from .evaluate.rim import SECTORS
+from .evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
+from .evaluation.membrane import width_for
+from .evaluation.rim import SECTORS
 from .export import self_intersecting_edges
-from .evaluate.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
+from .evaluation.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
 
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
 REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's slack); the widest is a stock full-face flap's

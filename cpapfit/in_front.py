@@ -12,7 +12,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from .align.nonrigid import Registration
-from .evaluate.rim import spacing
+from .evaluation.rim import spacing
 from .template import Template
 
 IN_FRONT_MM = 5.0  # scan this far out from the registered face is not skin

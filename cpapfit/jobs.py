@@ -27,14 +27,11 @@ from .errors import CpapfitError, InputError
 from .io import load_scan
 from .io.design import design_files
 from .io.report import report_files
-from .io.landmarks import read_landmarks
+from .io.landmarks import user_landmarks
 from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files
-from .landmarks.types import Landmarks
 from .pipeline import Design, design
 from .records import manifest_record
-from .scan import Scan
-from .template import load_template
 from .work import at_once
 
 MANIFEST = "manifest.json"
@@ -43,11 +40,6 @@ LEFTOVER = re.compile(r"^\..+\.(tmp|old)-\w+$")  # hidden staging names in OUT_D
 
 def _silent(stage: str) -> None:
     """The default stage callback: nothing."""
-
-
-def user_landmarks(path: str | Path | None, scan: Scan) -> Landmarks | None:
-    """A user landmarks file (in the scan's units) read as `Landmarks` in mm, or None without one."""
-    return read_landmarks(Path(path), scan.units, len(load_template().vertices)) if path else None
 
 
 @dataclass(frozen=True)

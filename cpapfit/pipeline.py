@@ -18,9 +18,9 @@ from .cushion.solid import cushion_sheet
 from .cushion.generic import NOSE_TIP, place, template_cushion
 from .compensation import Preload, compensated_cushion
 from .envelope import enveloped_cushion
-from .evaluate.fit import CushionFit, Face, FitParams, face_of, fit_cushion
-from .evaluate.gap import RimGap, rim_gap
-from .evaluate.states import StateFit, fit_states, merged, sleep_states
+from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
+from .evaluation.gap import RimGap, rim_gap
+from .evaluation.states import StateFit, fit_states, merged, sleep_states
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
 from .proportions import proportions
@@ -168,14 +168,14 @@ def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage
 def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
     fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
-    placement: Placement | None = None, stock: str | None = "best",
+    placement: Placement | None = None, stock: str | None = "best", quality: QualityParams = QualityParams(),
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
     cushion onto the face awake and asleep, beside the stock cushion a clinic would fit
     (`compared_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
     is called as each stage starts; the stock cushion is fitted by `submit` (`work.py`), alongside
-    the design when that is a worker process's.
+    the design when that is a worker process's. `quality`: the gates' thresholds.
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
     placement = placement or place_template(scan, user_landmarks, on_stage)
@@ -188,7 +188,7 @@ def design(
     edge = neutral.grid(256, 2)[:, 0]
     rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
     shape = proportions(load_template().vertices, al.similarity, reg)
-    quality = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape))  # or refuse: rescan
+    gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape, quality))  # or refuse: rescan
     fitting = submit(compared_stock, mask, face, stock, params, fit_params) if stock else None
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
@@ -204,7 +204,7 @@ def design(
         on_stage("the stock cushion a clinic would fit")
         compared = fitting.result()
         fits, states = fits | {"stock": compared.best.fit}, tuple(map(merged, states, compared.states))
-    return Design(al, reg, contact, cushion, solid, checks, rim, quality, preload, moulded.parts, moulded.draft,
+    return Design(al, reg, contact, cushion, solid, checks, rim, gates, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared)
 
 

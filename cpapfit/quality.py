@@ -57,8 +57,8 @@ from scipy.spatial import cKDTree
 from .align.nonrigid import NonrigidParams, Registration
 from .contact import Contact
 from .errors import QualityError
-from .evaluate.gap import SPACINGS, RimGap, data_reach, off_skin
-from .evaluate.rim import spacing
+from .evaluation.gap import SPACINGS, RimGap, data_reach, off_skin
+from .evaluation.rim import spacing
 from .in_front import IN_FRONT_MM, in_front_area_mm2
 from .landmarks.types import WITHOUT_COLOURS, Landmarks
 from .proportions import Proportions

@@ -6,11 +6,11 @@ import numpy as np
 
 from . import __version__
 from .draft import MIN_DRAFT_DEG
-from .evaluate.fe import SILICONE_KPA, SILICONE_POISSON
-from .evaluate.fit import FitParams
-from .evaluate.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
-from .evaluate.membrane import BAND_MM, MEMBRANE_MAX_MM
-from .evaluate.states import AWAKE
+from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
+from .evaluation.fit import FitParams
+from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
+from .evaluation.membrane import BAND_MM, MEMBRANE_MAX_MM
+from .evaluation.states import AWAKE
 from .io.landmarks import landmarks_record
 from .pipeline import Alignment, Design
 from .scan import Scan
@@ -116,7 +116,7 @@ def design_record(d: Design, scan: Scan) -> dict:
         **evaluation_record(d.fits, d.fit_params),
         "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
         **({"stock_fitting": d.stock.record()} if d.stock else {}),
-        "states_about": "the face asleep (`cpapfit.evaluate.states`): lying on the back with the jaw dropped (the ICT model's "
+        "states_about": "the face asleep (`cpapfit.evaluation.states`): lying on the back with the jaw dropped (the ICT model's "
                         "jawOpen carried onto this face), the mask pushed across its axis or rolled by a pillow, the CPAP "
                         "range's ends; each cushion at its awake headgear force; the custom cushion's membrane is sized so that "
                         "it seals in each (`cpapfit.envelope`); stock: the best stock size as a clinic fits it (stock_fitting)",

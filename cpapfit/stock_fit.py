@@ -19,9 +19,9 @@ import trimesh
 
 from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
-from .evaluate.fit import CushionFit, Face, FitParams, fit_rim
-from .evaluate.rim import find_rim, in_plane, refined
-from .evaluate.states import StateFit, fit_states, sleep_states
+from .evaluation.fit import CushionFit, Face, FitParams, fit_rim
+from .evaluation.rim import find_rim, in_plane, refined
+from .evaluation.states import StateFit, fit_states, sleep_states
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals

@@ -10,7 +10,7 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.write import write_files
 from cpapfit.pipeline import design, place_template
-from cpapfit.phantom import make_phantom
+from cpapfit.synthetic import make_phantom
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

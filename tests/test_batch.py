@@ -19,7 +19,7 @@ from cpapfit.batch import find_scans
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.summary import summary_csv, summary_html
 from cpapfit.jobs import ScanTask, content_hash, run_scan
-from cpapfit.phantom import make_phantom
+from cpapfit.synthetic import make_phantom
 from test_cli import assert_one_line_error
 
 

@@ -143,7 +143,7 @@ def test_a_bug_gives_one_line_and_writes_nothing(cli, tmp_path, phantom1_dir, mo
     monkeypatch.setattr(pipeline, "register_template", broken)
     out = tmp_path / "out"
     code, _, err = cli("design", phantom1_dir, "--mask", "nasal", "--out", out, "--quiet")
-    assert code == 1 and "Traceback" not in err
+    assert code == 3 and "Traceback" not in err
     assert err.strip().splitlines() == [err.strip()] and err.startswith("cpapfit: internal error: RuntimeError: a stage broke")
     assert not out.exists() or not any(out.iterdir())
 
@@ -211,7 +211,7 @@ def test_an_output_folder_that_is_a_file_is_one_line(cli, tmp_path):
 
 
 def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
-    from cpapfit.cli import design_summary
+    from cpapfit.commands import design_summary
     fit = {"mask": "nasal", "cushion": {"width_mm": 52.0, "height_mm": 50.0, "depth_mm": 40.0, "min_wall_mm": 2.01, "membrane_min_mm": 0.5},
            "fit_before_compression": {"rim_gap_median_mm": None, "rim_gap_max_mm": None, "rim_covered_fraction": 0.0}}
     assert design_summary(fit).endswith("rim-to-skin gap before pre-load no scan data under the rim")

@@ -6,11 +6,11 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
-from cpapfit.evaluate.fit import FitParams
-from cpapfit.evaluate.leak import leak_l_min
-from cpapfit.evaluate.mechanics import press
-from cpapfit.evaluate.rim import find_rim, _skin_below
-from cpapfit.evaluate.tissue import stiffness
+from cpapfit.evaluation.fit import FitParams
+from cpapfit.evaluation.leak import leak_l_min
+from cpapfit.evaluation.mechanics import press
+from cpapfit.evaluation.rim import find_rim, _skin_below
+from cpapfit.evaluation.tissue import stiffness
 from cpapfit.template import load_template
 
 RING_MM = 30.0  # radius of the flat test rim
@@ -114,7 +114,7 @@ def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():
 def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points():
     """A cloud of points 4 mm apart on the plane z = 0 (with its normals): rim points 0.2 mm above it,
     midway between points (2.8 mm from the nearest), are 0.2 mm off the skin; 9 mm above, 9 mm."""
-    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.evaluation.gap import rim_gap
     from cpapfit.scan import Scan
 
     grid = np.stack(np.meshgrid(np.arange(-40, 41, 4.0), np.arange(-40, 41, 4.0)), -1).reshape(-1, 2)
@@ -128,7 +128,7 @@ def test_a_rim_over_a_clouds_sparse_patch_is_measured_to_its_skin_not_its_points
     """The plane z = 0 sampled every 1 mm but, over a 24 mm square, only every 8 mm (a decimated
     mesh's vertices are sparse where the face is flat): rim points on the plane there, 5.7 mm from
     the nearest point, are on the skin (0 mm); 8 mm above it, at least 8 mm off."""
-    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.evaluation.gap import rim_gap
     from cpapfit.scan import Scan
 
     grid = np.stack(np.meshgrid(np.arange(-40, 41, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
@@ -144,7 +144,7 @@ def test_a_rim_over_a_mesh_is_measured_to_the_skin_under_its_flange_not_one_stra
     """The plane z = 0 sampled every 0.5 mm, every 8th sample along each row standing 0.8 mm up (stray
     samples): rim points on the plane right above those samples, 0.3 mm from the closest scan
     surface, lie within 0.01 mm of the skin under the flange; 2 mm above the plane, 2 mm."""
-    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.evaluation.gap import rim_gap
     from cpapfit.scan import Scan
 
     vertices, faces = grid_mesh(41, 0.5)
@@ -174,7 +174,7 @@ def test_a_rim_on_a_noisy_scans_skin_is_measured_to_the_skin_not_the_noise():
     depth camera at 600 mm): rim points on the true skin read a median 0.1 mm and at most 0.35 mm
     from it (the median of seven ray hits on the noisy triangles: 0.42 mm), rim points 1 mm out
     1 +- 0.35 mm."""
-    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.evaluation.gap import rim_gap
     from cpapfit.scan import Scan
 
     vertices, faces = grid_mesh(61, 1.0)
@@ -194,7 +194,7 @@ def test_a_rim_on_a_noisy_scans_skin_is_measured_to_the_skin_not_the_noise():
 def test_a_rim_over_a_hole_is_not_covered_by_a_stray_point_in_it():
     """A plane with a 20 mm square hole holding nine points in no triangle (stray depth samples): the
     rim over the hole is not over scanned skin; the rim over the plane is, 1 mm above it."""
-    from cpapfit.evaluate.gap import rim_gap
+    from cpapfit.evaluation.gap import rim_gap
     from cpapfit.scan import Scan
 
     plane = trimesh.creation.box((100, 100, 2)).apply_translation((0, 0, -1))

@@ -9,7 +9,7 @@ from cpapfit.ict.phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.phantom import FRAMED, make_phantom
+from cpapfit.synthetic import FRAMED, make_phantom
 from cpapfit.pipeline import align
 
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from cpapfit.evaluate.calibration import section_stiffness, strip_stiffness
-from cpapfit.evaluate.fe import Material
-from cpapfit.evaluate.fe_checks import confined_layer_check, hertz_checks, plate_checks
-from cpapfit.evaluate.tissue import REGIONS, STRIP_MM
+from cpapfit.evaluation.calibration import section_stiffness, strip_stiffness
+from cpapfit.evaluation.fe import Material
+from cpapfit.evaluation.fe_checks import confined_layer_check, hertz_checks, plate_checks
+from cpapfit.evaluation.tissue import REGIONS, STRIP_MM
 from cpapfit.cushion.nurbs import CushionParams
 
 

@@ -12,7 +12,7 @@ from cpapfit.ict.phantom import LOWER_INNER_LIP, ict_head_mesh, make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import phantom_files
 from cpapfit.landmarks.facemesh import detect
-from cpapfit.phantom import to_camera
+from cpapfit.synthetic import to_camera
 from cpapfit.render import raycast
 from cpapfit.rgbd import project
 from cpapfit.template import load_template

@@ -5,9 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from cpapfit.evaluate.fit import FitParams, fit_rim
-from cpapfit.evaluate.membrane import BAND_MM, bending_stiffness, reach_mm, width_for
-from cpapfit.evaluate.states import FaceState, fit_states
+from cpapfit.evaluation.fit import FitParams, fit_rim
+from cpapfit.evaluation.membrane import BAND_MM, bending_stiffness, reach_mm, width_for
+from cpapfit.evaluation.states import FaceState, fit_states
 from cpapfit.pipeline import evaluated_cushions, face_for
 
 P4 = 4 * 0.0980665  # kPa: the lowest CPAP pressure

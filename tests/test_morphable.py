@@ -17,7 +17,7 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.metrics import mask_region
-from cpapfit.phantom import FRAMED, make_phantom
+from cpapfit.synthetic import FRAMED, make_phantom
 from cpapfit.pipeline import align, register_template, template_basis
 from cpapfit.scan import Scan
 from cpapfit.template import load_template

@@ -14,7 +14,7 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.metrics import flipped_triangles, mask_region, scan_to_template
-from cpapfit.phantom import FRAMED, make_phantom
+from cpapfit.synthetic import FRAMED, make_phantom
 from cpapfit.pipeline import align
 from cpapfit.rgbd import project
 from cpapfit.scan import Scan

@@ -28,8 +28,8 @@ from cpapfit.pipeline import design
 from cpapfit.work import at_once
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.phantom import SensorModel, make_phantom, with_colour_shift, with_holes
-from cpapfit.evaluate.gap import RimGap
+from cpapfit.synthetic import SensorModel, make_phantom, with_colour_shift, with_holes
+from cpapfit.evaluation.gap import RimGap
 from cpapfit.errors import QualityError
 from cpapfit.proportions import proportions
 from cpapfit.quality import QualityParams, assess, longest_run, require_quality
@@ -111,9 +111,10 @@ def test_a_clean_subject_has_its_true_proportions(twice, phantom1):
 
 
 def design_flags(tmp_path, ph, *extra) -> tuple[list[str], str]:
-    """Design a subject's capture; the codes of the gates it flags, and stderr."""
+    """Design a subject's capture (no stock comparison: only the gates are read); the codes of the
+    gates it flags, and stderr."""
     write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
-    code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out", *extra)
+    code, err = run_design(tmp_path / "capture", "--stock", "none", "--out", tmp_path / "out", *extra)
     assert code == 0, err
     fit = written(tmp_path / "out" / "fit.json")
     assert fit["rescan_advised"] is True and "rescan advised" in err
@@ -216,7 +217,7 @@ def test_a_capture_without_colour_is_designed_from_the_shape_and_flagged(tmp_pat
     real face that can put the seal a few mm from where landmarks put it."""
     write_files(tmp_path / "capture", capture_files(phantom1.image, phantom1.depth_raw, phantom1.intrinsics, phantom1.sensor.depth_scale))
     (tmp_path / "capture" / "color.png").unlink()
-    code, err = run_design(tmp_path / "capture", "--out", tmp_path / "out")
+    code, err = run_design(tmp_path / "capture", "--stock", "none", "--out", tmp_path / "out")
     fit = written(tmp_path / "out" / "fit.json")
     assert code == 0 and fit["landmarks"]["path"] == "fallback", err
     assert [w["code"] for w in fit["warnings"]] == ["landmark_free"] and "no face was detected" in err

@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.cushion.generic import template_cushion
 from cpapfit.cushion.solid import cushion_sheet
-from cpapfit.evaluate.fit import Face, FitParams, fit_cushion
-from cpapfit.evaluate.states import FaceState, fit_states, motions, moved, sleep_states, state_face
+from cpapfit.evaluation.fit import Face, FitParams, fit_cushion
+from cpapfit.evaluation.states import FaceState, fit_states, motions, moved, sleep_states, state_face
 from cpapfit.ict import LOWER_INNER_LIP, template_truth
 from cpapfit.ict.phantom import random_subject
 from cpapfit.pipeline import evaluated_cushions, face_for
@@ -124,7 +124,7 @@ def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, place
 
 
 def test_the_design_line_says_in_how_many_states_each_cushion_leaks():
-    from cpapfit.cli import asleep_summary
+    from cpapfit.commands import asleep_summary
 
     row = lambda name, custom, stock: {"name": name, "custom": {"leak_l_min": custom}, "stock": {"leak_l_min": stock}}  # noqa: E731
     fit = {"states": [row("awake", 0.0, 9.0), row("a", 0.5, 3.0), row("b", 12.0, 1.0), {"name": "c", "error": "no skin"}]}

@@ -5,8 +5,8 @@ import pytest
 import trimesh
 
 from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, size_scale, stock_cushion
-from cpapfit.evaluate.fit import Face
-from cpapfit.evaluate.membrane import MEMBRANE_MAX_MM, face_thickness_mm
+from cpapfit.evaluation.fit import Face
+from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm
 from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, gauge_size, seated
 from cpapfit.template import load_template
 

@@ -9,9 +9,16 @@ import numpy as np
 from ..errors import InputError
 from ..landmarks.mouth import lips_apart_in_points
 from ..landmarks.types import Landmarks
+from ..scan import Scan
+from ..template import load_template
 from .units import MM_PER_UNIT
 
 MIN_LANDMARKS = 4
+
+
+def user_landmarks(path: str | Path | None, scan: Scan) -> Landmarks | None:
+    """A user landmarks file (in the scan's units) read as `Landmarks` in mm, or None without one."""
+    return read_landmarks(Path(path), scan.units, len(load_template().vertices)) if path else None
 
 
 def read_landmarks(path: Path, units: str, n_template: int) -> Landmarks:

@@ -8,7 +8,7 @@ import trimesh
 
 from .. import __version__
 from ..ict.phantom import HeadMesh
-from ..phantom import Phantom
+from ..synthetic import Phantom
 from ..rgbd import project
 from ..template import N_LANDMARKS, load_template
 from .capture import capture_files

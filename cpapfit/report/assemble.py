@@ -12,7 +12,7 @@ from matplotlib import colormaps
 from .. import __version__
 from ..align.nonrigid import Registration
 from ..contact import Contact
-from ..evaluate.fit import CushionFit
+from ..evaluation.fit import CushionFit
 from ..pipeline import Alignment, Design
 from ..render import scene_of
 from ..scan import Scan

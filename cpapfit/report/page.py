@@ -10,7 +10,7 @@ import base64
 import html
 from dataclasses import dataclass
 
-from ..evaluate.fit import CUSHIONS
+from ..evaluation.fit import CUSHIONS
 
 
 # key suffix -> (unit, display factor, decimals)

@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 
 from ..align.similarity import Similarity
 from ..landmarks.types import Landmarks
-from ..phantom import TEMPLATE_TO_CAMERA
+from ..synthetic import TEMPLATE_TO_CAMERA
 from ..render import raycast, scene_of, shade
 from ..scan import Intrinsics
 from ..template import Template

@@ -57,7 +57,7 @@ def rim_gap(rim: np.ndarray, normals: np.ndarray | None, scan: Scan, surface: tr
     the NEAREST scan points is on its `_edge`). The skin is the `quadric_gap` fit across the scan's
     normal there (the mean of the NEAREST points' normals, turned to agree with the (K, 3) unit skin
     `normals` of the registered face, or with the nearest point's). Where the scan is too coarse for
-    it: a mesh (`surface`: `scan_surface`) the skin under the flange as `evaluate.rim` finds it
+    it: a mesh (`surface`: `scan_surface`) the skin under the flange as `evaluation.rim` finds it
     (`skin_under`); where no ray meets the mesh within NORMAL_REACH_MM, and for a point cloud, the
     tangent plane at the nearest point, if within CLOUD_REACH_MM or SPACINGS times the points'
     spacing there, at most NORMAL_REACH_MM (not the gaps between the points: a cloud of a decimated

@@ -1,0 +1,113 @@
+"""cpapfit from Python: the command line's work as functions over typed results.
+
+    import cpapfit
+    scan = cpapfit.load_scan(cpapfit.phantom(3, "subject"))  # a capture folder or a mesh file, in mm
+    result = cpapfit.design(scan, mask="nasal")
+    print(result.fit["custom"]["leak_l_min"], result.quality["rescan_advised"])
+    result.save("out")  # the files of `cpapfit design`, written as one set
+
+Everything is in millimetres in the scan's frame; `fit` and the saved files are those `cpapfit
+design` writes (`docs/formats.md`, `cpapfit/schemas/`).
+"""
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .cushion.nurbs import CushionParams
+from .errors import InputError
+from .evaluation.fit import FitParams
+from .evaluation.states import fit_states, merged, sleep_states
+from .io import load_scan
+from .io.design import design_files
+from .io.landmarks import user_landmarks
+from .io.phantom import write_phantom
+from .io.report import report_files
+from .io.write import write_files
+from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template
+from .pipeline import design as designed
+from .quality import QualityParams
+from .records import evaluate_record
+from .scan import Scan
+from .stock_fit import compared_stock
+
+__all__ = ["Params", "CushionParams", "FitParams", "QualityParams", "DesignResult", "load_scan", "phantom", "design", "evaluate"]
+
+
+@dataclass(frozen=True)
+class Params:
+    """Every setting of a design in one place: the cushion's shape, the fit model, the quality
+    gates, and the stock cushion to compare with (a size, "gauge", "best" or None)."""
+
+    cushion: CushionParams = CushionParams()
+    fit: FitParams = FitParams()
+    quality: QualityParams = QualityParams()
+    stock: str | None = "best"
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """A design and its files: `design` every stage's result, `files` {name: bytes} of everything
+    `cpapfit design` writes (report included)."""
+
+    design: Design
+    scan: Scan
+    files: dict = field(repr=False)
+
+    @property
+    def fit(self) -> dict:
+        """fit.json: the fit, the checks and the quality gates' values (`docs/formats.md`)."""
+        return json.loads(self.files["fit.json"])
+
+    @property
+    def quality(self) -> dict:
+        """The quality gates: rescan_advised, warnings and every gate's value."""
+        return self.design.quality.record()
+
+    def save(self, folder: str | Path) -> Path:
+        """Every file written into `folder` (created), each to a temporary name then renamed."""
+        write_files(Path(folder), self.files)
+        return Path(folder)
+
+
+def phantom(seed: int, folder: str | Path, population: str = "ict", mouth_open_mm: float = 0.0) -> Path:
+    """A synthetic subject (an RGB-D capture with its ground truth, `cpapfit phantom`) written into
+    `folder`; the folder, for `load_scan`."""
+    from .ict.phantom import make_ict_phantom
+    from .synthetic import make_phantom
+
+    make = make_ict_phantom if population == "ict" else make_phantom
+    write_phantom(make(seed, mouth_open_mm=mouth_open_mm), Path(folder))
+    return Path(folder)
+
+
+def design(scan: Scan, mask: str = "nasal", landmarks: str | Path | None = None, params: Params = Params(),
+           report: bool = True) -> DesignResult:
+    """`cpapfit design` of a loaded scan: `landmarks` a landmarks file (in the scan's units) to use
+    instead of detection; `report` whether to draw report.html and its pictures."""
+    d = designed(scan, mask, user_landmarks(landmarks, scan), params.cushion, params.fit, stock=params.stock, quality=params.quality)
+    files = design_files(d, scan)
+    return DesignResult(d, scan, files | (report_files(d, scan, files) if report else {}))
+
+
+def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False, stock: str | None = None,
+             states: bool = False, force_n: float | None = None, landmarks: str | Path | None = None,
+             params: Params = Params(), cushion_file: str = "") -> dict:
+    """`cpapfit evaluate`: a cushion mesh (trimesh, mm, the scan's frame; from `cushion_file`) pressed
+    onto the scan at `force_n` N (None: its recommended force); with `mask`, the `generic` cushion at
+    the same force, a `stock` cushion (a size, "gauge" or "best") fitted as a clinic fits it, and with
+    `states` every state of the sleeping face. The fit.json record."""
+    if (generic or stock or states) and not mask:
+        raise InputError("generic, stock and states need the mask (nasal or oronasal): which cushion to compare with, which states to press")
+    placed = place_template(scan, user_landmarks(landmarks, scan))
+    face = face_for(scan, placed.alignment, placed.registration)
+    cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
+    fits = evaluated(face, cushions, params.cushion, params.fit, force_n)
+    compared = compared_stock(mask, face, stock, params.cushion, params.fit, asleep=states) if stock else None
+    fits |= {"stock": compared.best.fit} if compared else {}
+    pressed = None
+    if states:
+        pressed = fit_states(cushions, face, sleep_states(mask), params.cushion.flange_mm, fits["custom"].force_n, params.fit, fits)
+        pressed = tuple(map(merged, pressed, compared.states)) if compared else pressed
+    return evaluate_record(scan, cushion_file, fits, params.fit, compared, pressed)
+

@@ -1,0 +1,40 @@
+"""The public API: the README's five-line Python design, its files against the shipped schemas."""
+
+import subprocess
+import sys
+
+import numpy as np
+import trimesh
+
+from records import written
+
+
+def test_the_python_quick_start_designs_and_saves_files_that_follow_the_schemas(tmp_path):
+    import cpapfit
+
+    scan = cpapfit.load_scan(cpapfit.phantom(1, tmp_path / "subject", population="template"))
+    result = cpapfit.design(scan, mask="nasal", params=cpapfit.Params(stock="gauge"), report=False)
+    folder = result.save(tmp_path / "out")
+    fit = written(folder / "fit.json")
+    assert fit == result.fit and fit["schema_version"] == 1 and result.quality["rescan_advised"] == fit["rescan_advised"]
+    assert fit["custom"]["leak_l_min"] <= 1.0 and fit["stock_fitting"]["size"] == fit["stock_fitting"]["gauge_size"]
+    curve = written(folder / "contact_curve.json")
+    assert np.allclose(curve["points"], result.design.contact.curve, atol=1e-4)  # mm, as designed
+    assert trimesh.load(folder / "cushion.stl").is_watertight and not list(folder.glob(".*"))  # no temporary left
+
+
+def test_evaluate_from_python_gives_the_designs_numbers(tmp_path):
+    """`cpapfit.evaluate` of the written cushion gives what `design` recorded for it (same force)."""
+    import cpapfit
+
+    scan = cpapfit.load_scan(cpapfit.phantom(2, tmp_path / "subject", population="template"))
+    result = cpapfit.design(scan, mask="oronasal", params=cpapfit.Params(stock=None), report=False)
+    again = cpapfit.evaluate(scan, result.design.solid, force_n=result.fit["headgear_force_n"])
+    for key in ("pressure_max_kpa", "leak_l_min", "window_fraction"):
+        assert abs(again["custom"][key] - result.fit["custom"][key]) <= 0.01, key
+
+
+def test_the_command_line_starts_without_loading_the_stages():
+    """`import cpapfit.cli` (what `cpapfit --help` runs) loads neither trimesh nor the report."""
+    code = "import sys, cpapfit.cli; print(sorted(m for m in ('trimesh', 'matplotlib', 'plotly', 'cpapfit.pipeline') if m in sys.modules))"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
