@@ -17,7 +17,7 @@ from pathlib import Path
 from .cushion.nurbs import CushionParams
 from .errors import InputError
 from .evaluation.fit import FitParams
-from .evaluation.states import fit_states, merged, sleep_states
+from .evaluation.states import fit_states, sleep_states
 from .io import load_scan
 from .io.design import design_files
 from .io.landmarks import user_landmarks
@@ -104,10 +104,10 @@ def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False
     cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
     fits = evaluated(face, cushions, params.cushion, params.fit, force_n)
     compared = compared_stock(mask, face, stock, params.cushion, params.fit, asleep=states) if stock else None
-    fits |= {"stock": compared.best.fit} if compared else {}
+    fits |= compared.fits if compared else {}
     pressed = None
     if states:
         pressed = fit_states(cushions, face, sleep_states(mask), params.cushion.flange_mm, fits["custom"].force_n, params.fit, fits)
-        pressed = tuple(map(merged, pressed, compared.states)) if compared else pressed
+        pressed = compared.beside(pressed) if compared else pressed
     return evaluate_record(scan, cushion_file, fits, params.fit, compared, pressed)
 

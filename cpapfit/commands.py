@@ -110,7 +110,8 @@ def fit_summary(fit: dict) -> str:
         if name not in fit:
             continue
         s = fit[name]
-        label = f"stock {fit['stock_fitting']['size']}" if name == "stock" else name
+        label = {"stock": f"stock {fit.get('stock_fitting', {}).get('size')}",
+                 "stock_gauge": f"stock {fit.get('stock_fitting', {}).get('gauge_size')} (the gauge's pick)"}.get(name, name)
         cv = "n/a" if s["pressure_cv"] is None else f"{s['pressure_cv']:.2f}"
         seal = "does not seal" if s["seal_force_n"] is None else f"seals from {s['seal_force_n']:.1f} N"
         lines.append(

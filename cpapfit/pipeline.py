@@ -20,7 +20,7 @@ from .compensation import Preload, compensated_cushion
 from .envelope import enveloped_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
-from .evaluation.states import StateFit, fit_states, merged, sleep_states
+from .evaluation.states import StateFit, fit_states, sleep_states
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
 from .proportions import proportions
@@ -203,7 +203,7 @@ def design(
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
         compared = fitting.result()
-        fits, states = fits | {"stock": compared.best.fit}, tuple(map(merged, states, compared.states))
+        fits, states = fits | compared.fits, compared.beside(states)
     return Design(al, reg, contact, cushion, solid, checks, rim, gates, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared)
 

@@ -11,7 +11,7 @@ at the force that seals them is better; among those that do not, the lower leak 
 The best size is the best seat of every size so judged.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -21,7 +21,7 @@ from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, fit_rim
 from .evaluation.rim import find_rim, in_plane, refined
-from .evaluation.states import StateFit, fit_states, sleep_states
+from .evaluation.states import StateFit, fit_states, merged, sleep_states
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals
@@ -55,15 +55,33 @@ class StockFit:
 class StockComparison:
     """The stock cushion a clinic would fit on a face, to set beside the custom one: the sizes
     tried, each at its best seat (`sizes`, best first), the size the gauge picks, and the best size
-    pressed in each sleep state (`sleep_states`) at the force the clinic set for it (or none)."""
+    pressed in each sleep state (`sleep_states`) at the force the clinic set for it (or none), and
+    the gauge's size too where it was tried and is not the best (`gauge_states`, else none)."""
 
     sizes: tuple[StockFit, ...]
     gauge: str
     states: tuple[StateFit, ...]
+    gauge_states: tuple[StateFit, ...] = ()
 
     @property
     def best(self) -> StockFit:
         return self.sizes[0]
+
+    @property
+    def gauge_fit(self) -> StockFit | None:
+        """The gauge's size, where it was tried and is not the best."""
+        return next((f for f in self.sizes[1:] if f.size == self.gauge), None)
+
+    @property
+    def fits(self) -> dict[str, CushionFit]:
+        """The awake fits to set beside the custom cushion's: "stock" the best size, "stock_gauge" the gauge's."""
+        gauge = self.gauge_fit
+        return {"stock": self.best.fit} | ({"stock_gauge": gauge.fit} if gauge else {})
+
+    def beside(self, states: tuple[StateFit, ...]) -> tuple[StateFit, ...]:
+        """Each of `states` (the same sleep states, other cushions) with this comparison's fits in it."""
+        out = tuple(map(merged, states, self.states))
+        return tuple(map(merged, out, self.gauge_states)) if self.gauge_states else out
 
     def record(self) -> dict:
         """fit.json's `stock_fitting`: how the best size was fitted, and every size tried."""
@@ -86,15 +104,20 @@ def compared_stock(mask: str, face: Face, choice: str = "best", params: CushionP
         sizes = tuple(best_stock(mask, face, params, fit_params).values())
     else:
         sizes = (seated(mask, gauge if choice == "gauge" else choice, face, params, fit_params),)
-    return StockComparison(sizes, gauge, stock_states(mask, sizes[0], face, params, fit_params) if asleep else ())
+    compared = StockComparison(sizes, gauge, ())
+    if not asleep:
+        return compared
+    gauge_fit = compared.gauge_fit
+    return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params),
+                   gauge_states=stock_states(mask, gauge_fit, face, params, fit_params, "stock_gauge") if gauge_fit else ())
 
 
 def stock_states(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams(),
-                 fit_params: FitParams = FitParams()) -> tuple[StateFit, ...]:
-    """The stock cushion of `fit` in each sleep state of `mask` on `face`, at the force set for it, as "stock"."""
+                 fit_params: FitParams = FitParams(), name: str = "stock") -> tuple[StateFit, ...]:
+    """The stock cushion of `fit` in each sleep state of `mask` on `face`, at the force set for it, as `name`."""
     mesh, thickness = placed_stock(mask, fit, face, params)
-    return fit_states({"stock": mesh}, face, sleep_states(mask), params.flange_mm, fit.fit.force_n, fit_params,
-                      {"stock": fit.fit}, {"stock": thickness})
+    return fit_states({name: mesh}, face, sleep_states(mask), params.flange_mm, fit.fit.force_n, fit_params,
+                      {name: fit.fit}, {name: thickness})
 
 
 def gauge_size(mask: str, registered: np.ndarray) -> str:

@@ -71,3 +71,7 @@ def test_a_design_sets_every_stock_size_beside_it_best_first(designed):
     assert record["size"] == sizes[0].size and list(record["sizes_best_first"]) == [f.size for f in sizes]
     assert record["gauge_size"] == d.stock.gauge in ("S", "M", "L")
     assert [s.state for s in d.stock.states] == [s.state for s in d.states]
+    gauge = d.stock.gauge != sizes[0].size  # the gauge's size beside the best, awake and asleep, where it is another
+    assert ("stock_gauge" in d.fits) == gauge and all(("stock_gauge" in s.fits) == gauge for s in d.states)
+    if gauge:
+        assert d.fits["stock_gauge"] is next(f.fit for f in sizes if f.size == d.stock.gauge)

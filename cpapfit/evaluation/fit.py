@@ -49,7 +49,7 @@ class FitParams:
                 "window_mmhg": [round(lo * MMHG_PER_KPA, 2), round(hi * MMHG_PER_KPA, 2)], "target_kpa": self.target_kpa}
 
 
-CUSHIONS = ("custom", "stock", "generic")  # the cushions a fit record may hold, in the order they are shown
+CUSHIONS = ("custom", "stock", "stock_gauge", "generic")  # the cushions a fit record may hold, in the order they are shown
 
 
 @dataclass(frozen=True)

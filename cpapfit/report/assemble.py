@@ -41,8 +41,10 @@ class Provenance:
 
 def evaluated_rims(d: Design) -> dict:
     """{"custom" | "stock": RimFit} from the design's evaluation: the rim's place on the skin, the gap
-    before load (the custom one's without its pre-load, i.e. its shape's fit), pressure and openings."""
-    return {name: rim_fit(fit, d.preload_at(fit.rim.points) if name == "custom" else 0.0) for name, fit in d.fits.items()}
+    before load (the custom one's without its pre-load, i.e. its shape's fit), pressure and openings.
+    The pictures set the custom cushion beside the best stock size; the gauge's size is in the tables."""
+    return {name: rim_fit(fit, d.preload_at(fit.rim.points) if name == "custom" else 0.0)
+            for name, fit in d.fits.items() if name != "stock_gauge"}
 
 
 def rim_fit(fit: CushionFit, preload_mm: np.ndarray | float = 0.0) -> RimFit:

@@ -95,10 +95,12 @@ def cushions_in(fit: dict) -> list[str]:
 
 def cushion_label(fit: dict, name: str) -> str:
     """A cushion's column heading: the stock cushion with its size and how it was chosen."""
+    stock = fit.get("stock_fitting", {})
+    if name == "stock_gauge":
+        return f"stock cushion, size {stock.get('gauge_size', '?')} (the gauge's pick)"
     if name != "stock":
         return f"{name} cushion"
-    stock = fit.get("stock_fitting", {})
-    how = "best size by fit" if "sizes_best_first" in stock else "size as evaluated"
+    how = "best size by fit" if len(stock.get("sizes_best_first", {})) > 1 else "size as evaluated"
     return f"stock cushion, size {stock.get('size', '?')} ({how}; the gauge picks {stock.get('gauge_size', '?')})"
 
 

@@ -30,7 +30,8 @@ SEALED, OPEN = "#1a9850", "#d73027"
 OPEN_RGB = np.array([20, 20, 20], dtype=np.uint8)
 NO_DATA_RGB = np.array([150, 150, 150], dtype=np.uint8)
 COMPARED_STYLE = {"color": "#e08214", "linestyle": "--"}
-LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "stock": COMPARED_STYLE, "generic": COMPARED_STYLE}
+LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "stock": COMPARED_STYLE, "generic": COMPARED_STYLE,
+               "stock_gauge": {"color": "#7b3294", "linestyle": ":"}}
 
 
 def _rgb(hex_colour: str) -> np.ndarray:
