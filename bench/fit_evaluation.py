@@ -1,4 +1,4 @@
-"""Issue 6's table: custom vs generic cushion at 10 cmH2O on synthetic subjects and the shared
+"""Custom vs generic cushion at 10 cmH2O on synthetic subjects and the shared
 real scans: leak, safe-window fraction, pressure CV and peak, sealing force.
 
 Usage: .venv/bin/python bench/fit_evaluation.py [--seeds 20]   (prints a Markdown table)

@@ -1,4 +1,4 @@
-"""Landmarks and similarity alignment on synthetic subjects (issue 3 acceptance figures).
+"""Landmarks and similarity alignment on synthetic subjects.
 
 For each seed: is a face found (and by which path), the mean 3-D error of the lifted landmarks
 against the true landmarks, and the similarity-aligned template's mean distance to the true

@@ -1,4 +1,4 @@
-"""An open mouth, or glasses (issue 9's messy scans): framed synthetic subjects with the jaw dropped
+"""An open mouth, or glasses: framed synthetic subjects with the jaw dropped
 or a glasses frame on, designed end to end. Printed per subject and opening: the mean error of the
 registered mask region against the truth (mm), the seal curve's largest distance from the true skin
 (mm), the lips' opening as detected (mm), the area in front of the face (mm²), and the outcome

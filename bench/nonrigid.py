@@ -1,5 +1,5 @@
 """Non-rigid registration: accuracy on synthetic subjects, speed and memory on a full 640x480
-capture, and trimesh's nricp_amberg on the same pair (issue 4 figures).
+capture, and trimesh's nricp_amberg on the same pair.
 
 Usage:
   .venv/bin/python bench/nonrigid.py accuracy [--seeds 50]

@@ -1,4 +1,4 @@
-"""Issue 5's fit before compression: the cushion rim's gap to the scan where the scan has data
+"""The fit before compression: the cushion rim's gap to the scan where the scan has data
 (`Design.rim`: to the skin under the flange, a quadric through the scan within 4 mm), on synthetic subjects
 against both the scan and the subject's true skin, and the scan's own noise floor along the same
 rim: how far the true skin under the rim lies from the scan, measured the same way (a rim exactly

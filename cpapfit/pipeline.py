@@ -29,7 +29,7 @@ from .align.similarity import Similarity
 from .landmarks.types import Landmarks
 from .metrics import mask_region
 from .scan import Scan, scan_surface
-from .stock_fit import StockComparison, compared_stock
+from .stock_fit import StockComparison, fitting_stock
 from .template import load_template
 from .work import at_once
 
@@ -173,8 +173,8 @@ def design(
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
     cushion onto the face awake and asleep, beside the stock cushion a clinic would fit
-    (`compared_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
-    is called as each stage starts; the stock cushion is fitted by `submit` (`work.py`), alongside
+    (`fitting_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
+    is called as each stage starts; the stock sizes are seated by `submit` (`work.py`), alongside
     the design when that is a worker process's. `quality`: the gates' thresholds.
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
@@ -189,7 +189,7 @@ def design(
     rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
     shape = proportions(load_template().vertices, al.similarity, reg)
     gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape, quality))  # or refuse: rescan
-    fitting = submit(compared_stock, mask, face, stock, params, fit_params) if stock else None
+    fitting = fitting_stock(mask, face, stock, params, fit_params, submit) if stock else None
     on_stage("solid and checks")
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
@@ -202,7 +202,7 @@ def design(
     compared = None
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
-        compared = fitting.result()
+        compared = fitting.comparison()
         fits, states = fits | compared.fits, compared.beside(states)
     return Design(al, reg, contact, cushion, solid, checks, rim, gates, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared)

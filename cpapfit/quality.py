@@ -8,7 +8,7 @@ Measured once the template is registered and the seal carried over (all mm):
 - residual: median point-to-plane distance of the contact band's matched vertices to the scan:
   a noisy or moving scan, or a registration that did not reach the skin;
 - landmarks: median distance from the landmarks to the scanned skin. Detected landmarks are
-  lifted from the depth, so they lie on it; landmarks off it (another session's coordinates, a
+  lifted from the depth, so they lie on it; landmarks off it (another capture's coordinates, a
   wrong frame, a careless file) drag the registration, and the mask, along the skin where
   nothing in the geometry can pull it back. Landmark-free alignments (fallback) are not judged.
 - landmark spread: the landmarks' median distance to their places on the face registered at the

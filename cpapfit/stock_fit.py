@@ -13,6 +13,7 @@ The best size is the best seat of every size so judged.
 
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from typing import Callable
 
 import numpy as np
 import trimesh
@@ -22,6 +23,7 @@ from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock
 from .evaluation.fit import CushionFit, Face, FitParams, fit_rim
 from .evaluation.rim import find_rim, in_plane, refined
 from .evaluation.states import StateFit, fit_states, merged, sleep_states
+from .work import at_once
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals
@@ -95,21 +97,51 @@ class StockComparison:
 SIZE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region")
 
 
+@dataclass(frozen=True)
+class StockFitting:
+    """Stock sizes handed to `submit` (`work.py`: a worker process's, or at once) to be seated on
+    `face` while other work goes on; `comparison` gathers them, seating here any size the worker
+    has not started yet."""
+
+    mask: str
+    face: Face
+    seats: tuple  # ((size, Future of its StockFit), ...) in SIZES order
+    params: CushionParams
+    fit_params: FitParams
+    submit: Callable
+
+    def comparison(self, asleep: bool = True) -> StockComparison:
+        """The `StockComparison`; `asleep`: the best size (and the gauge's) pressed in each sleep state too."""
+        mask, face, params, fit_params = self.mask, self.face, self.params, self.fit_params
+        done = {size: seated(mask, size, face, params, fit_params) if job.cancel() else job.result()
+                for size, job in reversed(self.seats)}  # from the end: the sizes the worker is least likely to have started
+        sizes = tuple(sorted((done[size] for size, _ in self.seats), key=StockFit.rank))
+        compared = StockComparison(sizes, gauge_size(mask, np.asarray(face.registered.vertices)), ())
+        gauge_fit = compared.gauge_fit
+        if not asleep:
+            return compared
+        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge") if gauge_fit else None
+        return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params),
+                       gauge_states=gauge_states.result() if gauge_states else ())
+
+
+def fitting_stock(mask: str, face: Face, choice: str = "best", params: CushionParams = CushionParams(),
+                  fit_params: FitParams = FitParams(), submit: Callable = at_once) -> StockFitting:
+    """The stock cushion of `mask` a clinic would fit on `face`, being seated: `choice` a size,
+    "gauge" (the size the gauge picks) or "best" (every size, the best kept)."""
+    if choice == "best":
+        sizes = SIZES[mask]
+    else:
+        sizes = (gauge_size(mask, np.asarray(face.registered.vertices)) if choice == "gauge" else choice,)
+    seats = tuple((size, submit(seated, mask, size, face, params, fit_params)) for size in sizes)
+    return StockFitting(mask, face, seats, params, fit_params, submit)
+
+
 def compared_stock(mask: str, face: Face, choice: str = "best", params: CushionParams = CushionParams(),
                    fit_params: FitParams = FitParams(), asleep: bool = True) -> StockComparison:
-    """The stock cushion of `mask` a clinic would fit on `face`: `choice` a size, "gauge" (the size
-    the gauge picks) or "best" (every size seated, the best kept); `asleep`: pressed in each sleep state too."""
-    gauge = gauge_size(mask, np.asarray(face.registered.vertices))
-    if choice == "best":
-        sizes = tuple(best_stock(mask, face, params, fit_params).values())
-    else:
-        sizes = (seated(mask, gauge if choice == "gauge" else choice, face, params, fit_params),)
-    compared = StockComparison(sizes, gauge, ())
-    if not asleep:
-        return compared
-    gauge_fit = compared.gauge_fit
-    return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params),
-                   gauge_states=stock_states(mask, gauge_fit, face, params, fit_params, "stock_gauge") if gauge_fit else ())
+    """`fitting_stock` here and now, gathered: the stock cushion of `mask` a clinic would fit on
+    `face`; `asleep`: pressed in each sleep state too."""
+    return fitting_stock(mask, face, choice, params, fit_params).comparison(asleep)
 
 
 def stock_states(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams(),
@@ -128,8 +160,7 @@ def gauge_size(mask: str, registered: np.ndarray) -> str:
 
 def best_stock(mask: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> dict[str, StockFit]:
     """Every stock size of `mask` seated on `face`, best first (size -> StockFit)."""
-    fits = sorted((seated(mask, size, face, params, fit_params) for size in SIZES[mask]), key=StockFit.rank)
-    return {f.size: f for f in fits}
+    return {f.size: f for f in compared_stock(mask, face, "best", params, fit_params, asleep=False).sizes}
 
 
 def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockFit:

@@ -1,1 +1,1 @@
-"""Fit evaluation: gaps between cushion and face (pressure and leak: issue 6)."""
+"""Fit evaluation: where a cushion meets the face, the tissue under it, its pressure, leak and seal, awake and asleep."""
