@@ -23,11 +23,11 @@ from .io.design import design_files
 from .io.landmarks import user_landmarks
 from .io.phantom import write_phantom
 from .io.report import report_files
-from .io.write import write_files
 from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template
 from .pipeline import design as designed
+from .jobs import ScanTask, save_folder
 from .quality import QualityParams
-from .records import evaluate_record
+from .records import evaluate_record, manifest_record
 from .scan import Scan
 from .stock_fit import compared_stock
 
@@ -48,7 +48,7 @@ class Params:
 @dataclass(frozen=True)
 class DesignResult:
     """A design and its files: `design` every stage's result, `files` {name: bytes} of everything
-    `cpapfit design` writes (report included)."""
+    `cpapfit design` writes (report included), `stock` the stock comparison it was made with."""
 
     design: Design
     scan: Scan
@@ -64,10 +64,15 @@ class DesignResult:
         """The quality gates: rescan_advised, warnings and every gate's value."""
         return self.design.quality.record()
 
+    stock: str | None = "best"
+
     def save(self, folder: str | Path) -> Path:
-        """Every file written into `folder` (created), each to a temporary name then renamed."""
-        write_files(Path(folder), self.files)
-        return Path(folder)
+        """Every file of the design and its manifest.json written into `folder` as one set
+        (`jobs.save_folder`: new, empty or an earlier cpapfit design folder)."""
+        folder = Path(folder)
+        task = ScanTask(Path(self.scan.source), folder, self.design.contact.mask, self.scan.units, self.stock)
+        save_folder(folder, self.files, manifest_record(task, tuple(self.files), None, {}))
+        return folder
 
 
 def phantom(seed: int, folder: str | Path, population: str = "ict", mouth_open_mm: float = 0.0) -> Path:
@@ -87,7 +92,7 @@ def design(scan: Scan, mask: str = "nasal", landmarks: str | Path | None = None,
     instead of detection; `report` whether to draw report.html and its pictures."""
     d = designed(scan, mask, user_landmarks(landmarks, scan), params.cushion, params.fit, stock=params.stock, quality=params.quality)
     files = design_files(d, scan)
-    return DesignResult(d, scan, files | (report_files(d, scan, files) if report else {}))
+    return DesignResult(d, scan, files | (report_files(d, scan, files) if report else {}), params.stock)
 
 
 def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False, stock: str | None = None,

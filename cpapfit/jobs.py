@@ -87,11 +87,12 @@ def _single_threaded() -> bool:
 
 
 def design_job(
-    scan_path: str | Path, out_dir: str | Path, mask: str = "nasal", landmarks_path: str | Path | None = None,
-    units: str = "auto", on_stage: Callable[[str], None] = _silent, parallel: bool = False, stock: str | None = "best",
-) -> DesignRun:
-    """`cpapfit design`: read the scan (and landmarks), design, build the report, write every file
-    atomically to `out_dir`. `parallel`: the mould and some report pictures made in a second process (`worker`)."""
+    scan_path: str | Path, mask: str = "nasal", landmarks_path: str | Path | None = None, units: str = "auto",
+    on_stage: Callable[[str], None] = _silent, parallel: bool = False, stock: str | None = "best",
+) -> tuple[DesignRun, dict[str, bytes]]:
+    """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
+    files {name: bytes}. `parallel`: the stock sizes and some report pictures made in a second
+    process (`worker`)."""
     with worker(parallel) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
@@ -99,9 +100,7 @@ def design_job(
         files = design_files(d, scan)
         on_stage("report")
         files |= report_files(d, scan, files, submit)
-    on_stage("writing files")
-    write_files(Path(out_dir), files)
-    return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files), d)
+    return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files), d), files
 
 
 @dataclass(frozen=True)
@@ -201,21 +200,34 @@ def design_folder(task: ScanTask, landmarks_path: str | Path | None = None, on_s
 
 
 def _design_folder(task: ScanTask, stamp: Callable[[], dict], landmarks_path=None, on_stage=_silent, parallel=False) -> DesignRun:
-    """Design into a hidden staging folder, write the manifest (with `stamp()`) last, rename it into
-    place of the folder, which must be new, empty or an earlier cpapfit design."""
-    if task.out.exists() and not (_owned(task.out) or _empty_folder(task.out)):
-        raise InputError(f"{task.out}: exists and is not a cpapfit design folder (no {MANIFEST}); move it away or choose another --out")
-    staging = _hidden(task.out, "tmp")
+    """Design `task`, then `save_folder` its files with the manifest (and `stamp()`)."""
+    _check_folder(task.out)
+    run, files = design_job(task.scan, task.mask, landmarks_path, task.units, on_stage, parallel, task.stock)
+    on_stage("writing files")
+    landmarks = None if landmarks_path is None else str(landmarks_path)
+    save_folder(task.out, files, manifest_record(task, run.files, landmarks, stamp()))
+    return run
+
+
+def save_folder(folder: Path, files: dict[str, bytes], manifest: dict) -> None:
+    """`files` {name: bytes} and then `manifest` (manifest.json) written into a hidden staging folder
+    renamed into place of `folder`, which must be new, empty or an earlier cpapfit design: the
+    folder holds the whole set or, if anything fails, what it held before."""
+    _check_folder(folder)
+    staging = _hidden(folder, "tmp")
     staging.mkdir(parents=True)
     try:
-        run = design_job(task.scan, staging, task.mask, landmarks_path, task.units, on_stage, parallel, task.stock)
-        landmarks = None if landmarks_path is None else str(landmarks_path)
-        manifest = manifest_record(task, run.files, landmarks, stamp())
+        write_files(staging, files)
         write_bytes(staging / MANIFEST, json_bytes(manifest))
-        _replace_folder(staging, task.out)
+        _replace_folder(staging, folder)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    return run
+
+
+def _check_folder(folder: Path) -> None:
+    """InputError unless `folder` is new, empty or an earlier cpapfit design (it will be replaced)."""
+    if folder.exists() and not (_owned(folder) or _empty_folder(folder)):
+        raise InputError(f"{folder}: exists and is not a cpapfit design folder (no {MANIFEST}); move it away or choose another --out")
 
 
 @contextlib.contextmanager

@@ -4,7 +4,10 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 import trimesh
+
+from cpapfit.errors import InputError
 
 from records import written
 
@@ -20,7 +23,14 @@ def test_the_python_quick_start_designs_and_saves_files_that_follow_the_schemas(
     assert fit["custom"]["leak_l_min"] <= 1.0 and fit["stock_fitting"]["size"] == fit["stock_fitting"]["gauge_size"]
     curve = written(folder / "contact_curve.json")
     assert np.allclose(curve["points"], result.design.contact.curve, atol=1e-4)  # mm, as designed
-    assert trimesh.load(folder / "cushion.stl").is_watertight and not list(folder.glob(".*"))  # no temporary left
+    assert trimesh.load(folder / "cushion.stl").is_watertight and not list(folder.parent.glob(".*"))  # no staging left
+    manifest = written(folder / "manifest.json")
+    assert sorted(manifest["files"]) == sorted(result.files) == sorted(p.name for p in folder.iterdir() if p.name != "manifest.json")
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("not a design")
+    with pytest.raises(InputError, match="not a cpapfit design folder"):
+        result.save(tmp_path / "mine")  # a folder of the user's own is never replaced
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "not a design"
 
 
 def test_evaluate_from_python_gives_the_designs_numbers(tmp_path):

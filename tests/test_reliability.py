@@ -278,7 +278,7 @@ def test_no_worker_is_forked_from_a_process_running_threads():
 
 
 def test_the_command_with_its_worker_process_gives_the_same_bytes(twice, phantom1_dir, tmp_path):
-    """`cpapfit design` as its own process (a fresh, single-threaded one: the mould and the design's
+    """`cpapfit design` as its own process (a fresh, single-threaded one: the stock sizes and the design's
     pictures are made in a forked worker, here even if the machine is busy) writes what the
     in-process runs wrote."""
     env = {**os.environ, "SOURCE_DATE_EPOCH": "1700000000"}
