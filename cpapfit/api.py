@@ -19,10 +19,9 @@ from .errors import InputError
 from .evaluation.fit import FitParams
 from .evaluation.states import fit_states, sleep_states
 from .io import load_scan
-from .io.design import design_files
 from .io.landmarks import user_landmarks
 from .io.phantom import write_phantom
-from .io.report import report_files
+from .outputs import design_files, report_files
 from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template
 from .pipeline import design as designed
 from .jobs import ScanTask, save_folder

@@ -14,7 +14,7 @@ from .errors import InputError
 from .evaluation.fit import CUSHIONS
 from .io import load_scan
 from .io.cushion import load_cushion
-from .io.design import registration_ply
+from .outputs import registration_ply
 from .io.landmarks import user_landmarks
 from .io.phantom import write_head_mesh, write_phantom
 from .io.summary import counts, summary_csv, summary_html

@@ -25,8 +25,7 @@ from typing import Callable
 from . import __version__
 from .errors import CpapfitError, InputError
 from .io import load_scan
-from .io.design import design_files
-from .io.report import report_files
+from .outputs import design_files, report_files
 from .io.landmarks import user_landmarks
 from .io.mesh import companion_files
 from .io.write import json_bytes, write_bytes, write_files

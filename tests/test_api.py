@@ -48,3 +48,14 @@ def test_the_command_line_starts_without_loading_the_stages():
     """`import cpapfit.cli` (what `cpapfit --help` runs) loads neither trimesh nor the report."""
     code = "import sys, cpapfit.cli; print(sorted(m for m in ('trimesh', 'matplotlib', 'plotly', 'cpapfit.pipeline') if m in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
+
+
+def test_io_imports_none_of_the_design_stages():
+    """`cpapfit.io` reads and writes files at the edge: loading all of it loads none of the stages
+    from registration on (nor the pipeline, the records or the jobs around them)."""
+    stages = ("pipeline", "align.nonrigid", "cushion", "compensation", "envelope", "evaluation", "stock_fit", "mould", "report",
+              "records", "outputs", "jobs")
+    code = ("import sys, pkgutil, importlib, cpapfit.io as io\n"
+            "[importlib.import_module(f'cpapfit.io.{m.name}') for m in pkgutil.iter_modules(io.__path__)]\n"
+            f"print(sorted(m for m in sys.modules if any(m == 'cpapfit.' + s or m.startswith('cpapfit.' + s + '.') for s in {stages!r})))")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"

@@ -21,8 +21,7 @@ from records import written
 from cpapfit.align.initial import DISAGREE_MM
 from cpapfit.cli import main
 from cpapfit.io import load_scan
-from cpapfit.io.design import design_files
-from cpapfit.io.report import report_files
+from cpapfit.outputs import design_files, report_files
 from cpapfit.jobs import worker
 from cpapfit.pipeline import design
 from cpapfit.work import at_once

@@ -11,8 +11,7 @@ import pytest
 from PIL import Image
 
 from cpapfit.io import load_scan
-from cpapfit.io.design import design_files
-from cpapfit.io.report import input_sha256, run_date
+from cpapfit.outputs import design_files, input_sha256, run_date
 from cpapfit.pipeline import design
 from cpapfit.report.advice import Notice, gate_notices, landmark_notices, scan_notices
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files

@@ -1,7 +1,7 @@
 """The report of a design as files: the pictures (PNG) and report.html, from the design, the
 scan, the fit.json record and, once evaluated, each cushion's rim pressure.
 
-Pure: the caller (cpapfit/io/report.py) supplies what comes from outside (input hash, date) and,
+Pure: the caller (cpapfit/outputs.py) supplies what comes from outside (input hash, date) and,
 optionally, a worker process (`work.py`) that draws the design's own pictures meanwhile."""
 
 from dataclasses import dataclass

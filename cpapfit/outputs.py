@@ -1,0 +1,67 @@
+"""The files of `cpapfit register` and `cpapfit design` (all mm, scan frame), as {name: bytes}:
+meshes, records and the report, with what the report takes from outside the pipeline: the input's
+SHA-256 and the run date (SOURCE_DATE_EPOCH when set, so that a rebuild gives the same bytes)."""
+
+import datetime
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .align.nonrigid import Registration
+from .export import stl_bytes, threemf_bytes
+from .io.write import json_bytes, ply_bytes
+from .pipeline import Design
+from .records import contact_curve_record, design_record
+from .report.assemble import Provenance, report_files as assemble_report
+from .scan import Scan
+from .template import load_template
+from .work import at_once
+
+
+def registration_ply(reg: Registration) -> bytes:
+    """The warped template as PLY with residual_mm (-1 where unmatched) and valid vertex properties."""
+    residual = np.where(reg.valid, reg.residual, -1.0)
+    attributes = {"residual_mm": residual.astype(np.float32), "valid": reg.valid.astype(np.uint8)}
+    return ply_bytes(reg.vertices, load_template().faces, attributes)
+
+
+def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
+    """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}."""
+    return {
+        "registered_template.ply": registration_ply(d.registration),
+        "contact_curve.json": json_bytes(contact_curve_record(d)),
+        "cushion.stl": stl_bytes(d.solid),
+        "cushion.3mf": threemf_bytes(d.solid, "cushion"),
+        **{f"{name}.stl": stl_bytes(part) for name, part in d.mould_parts.items()},
+        "fit.json": json_bytes(design_record(d, scan)),
+    }
+
+
+def input_sha256(path: Path) -> str:
+    """SHA-256 (hex) of a scan file, or of a capture folder: every file's relative name and bytes, in name order."""
+    path = Path(path)
+    digest = hashlib.sha256()
+    if path.is_file():
+        digest.update(path.read_bytes())
+        return digest.hexdigest()
+    for f in sorted(p for p in path.rglob("*") if p.is_file()):
+        digest.update(f.relative_to(path).as_posix().encode() + b"\0")
+        digest.update(hashlib.sha256(f.read_bytes()).digest())
+    return digest.hexdigest()
+
+
+def run_date() -> str:
+    """The run's UTC date and time as text; from SOURCE_DATE_EPOCH (seconds) when it is set."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    when = datetime.datetime.fromtimestamp(int(epoch), datetime.timezone.utc) if epoch else datetime.datetime.now(datetime.timezone.utc)
+    return when.strftime("%Y-%m-%d %H:%M UTC")
+
+
+def report_files(d: Design, scan: Scan, files: dict[str, bytes], submit=at_once) -> dict[str, bytes]:
+    """The pictures and report.html of a design whose files (with fit.json) are `files`, as {name: bytes};
+    `submit`: see `assemble.report_files`."""
+    provenance = Provenance(scan.source, input_sha256(Path(scan.source)), run_date())
+    return assemble_report(d, scan, json.loads(files["fit.json"]), provenance, submit)
