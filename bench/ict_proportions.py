@@ -18,7 +18,7 @@ import numpy as np
 
 from cpapfit import __version__
 from cpapfit.align.nonrigid import Registration
-from cpapfit.align.similarity import fit_similarity
+from cpapfit.similarity import fit_similarity
 from cpapfit.ict import load_ict, template_truth
 from cpapfit.ict.phantom import random_subject
 from cpapfit.pipeline import place_template

@@ -38,7 +38,7 @@ from unittest.mock import patch
 import numpy as np
 from scipy.spatial import cKDTree
 
-from cpapfit.align.similarity import fit_similarity
+from cpapfit.similarity import fit_similarity
 from cpapfit.errors import CpapfitError
 from cpapfit.ict import load_ict
 from cpapfit.ict.phantom import make_ict_phantom

@@ -25,7 +25,7 @@ from .export import SolidError, check_closed, check_solid
 from .mould import mould
 from .proportions import proportions
 from .quality import Quality, QualityParams, assess, require_quality
-from .align.similarity import Similarity
+from .similarity import Similarity
 from .landmarks.types import Landmarks
 from .metrics import mask_region
 from .scan import Scan, scan_surface

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .align.nonrigid import Registration
-from .align.similarity import Similarity
+from .similarity import Similarity
 
 MIN_MATCHED = 200  # fewer vertices on the scan than this cannot fix the map's 12 unknowns robustly
 

@@ -19,7 +19,7 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.cloud import facing_surface
-from cpapfit.landmarks.fallback import fallback_alignment, thinned
+from cpapfit.align.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
 from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.synthetic import KINECT_V1, make_phantom
@@ -378,7 +378,7 @@ def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
     """The phantom's alignment passes the face check; the same template shrunk to 0.57 about its
     nose tip (what MediaPipe on a shaded render once gave) still lies on skin, but not at an adult's size."""
     from cpapfit.align.check import NOSE_TIP, check_face, require_face
-    from cpapfit.align.similarity import Similarity
+    from cpapfit.similarity import Similarity
 
     ph = phantom1
     write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))

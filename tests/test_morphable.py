@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from cpapfit.align.correspondences import make_target, oriented
 from cpapfit.align.morphable import fit_shape
 from cpapfit.align.nonrigid import NonrigidParams, vertex_normals
-from cpapfit.align.similarity import fit_similarity
+from cpapfit.similarity import fit_similarity
 from cpapfit.ict import ict_face, load_ict, template_truth
 from cpapfit.ict.phantom import make_ict_phantom
 from cpapfit.io import load_scan

@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from cpapfit.align.nonrigid import Registration
-from cpapfit.align.similarity import Similarity
+from cpapfit.similarity import Similarity
 from cpapfit.pipeline import placed_by_shape
 from cpapfit.proportions import MIN_MATCHED, Proportions, proportions
 from cpapfit.quality import QualityParams, _shape_gates

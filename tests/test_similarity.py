@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cpapfit.align.similarity import _ls_pairwise_scale, fit_similarity, umeyama
+from cpapfit.similarity import _ls_pairwise_scale, fit_similarity, umeyama
 from cpapfit.template import load_template
 
 

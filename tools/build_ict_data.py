@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpapfit.align.similarity import best_rotation
+from cpapfit.similarity import best_rotation
 from cpapfit.ict import EXPRESSIONS, MULTIPIE_TO_FACEMESH
 from cpapfit.template import load_template
 

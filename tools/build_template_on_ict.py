@@ -22,7 +22,7 @@ from matplotlib.path import Path as Polygon
 from scipy.spatial import ConvexHull
 
 from cpapfit.align.nonrigid import Registration, register
-from cpapfit.align.similarity import fit_similarity
+from cpapfit.similarity import fit_similarity
 from cpapfit.ict import MULTIPIE_TO_FACEMESH, IctModel, load_ict, template_truth
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.scan import Scan

@@ -34,7 +34,7 @@ from ..errors import InputError
 from ..landmarks.cloud import facing_surface
 from ..scan import HEAD_MM, Scan
 from ..template import Template
-from .similarity import Similarity
+from ..similarity import Similarity
 
 NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
 COVER_MM = 10.0

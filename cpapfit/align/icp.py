@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .similarity import Similarity, umeyama
+from ..similarity import Similarity, umeyama
 
 TRIM = 0.8  # fraction of closest pairs kept each iteration
 MAX_PAIR_MM = 20.0

@@ -11,10 +11,10 @@ from ..scan import Scan, robust_extent
 from ..template import Template, central_face
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
 from ..landmarks.cloud import facing_surface
-from ..landmarks.fallback import fallback_alignment
+from .fallback import fallback_alignment
 from ..landmarks.types import WITHOUT_COLOURS, Landmarks
 from .check import FaceCheck, check_face, require_face
-from .similarity import Similarity, fit_similarity
+from ..similarity import Similarity, fit_similarity
 
 
 # A face found on renders framed by the landmark-free alignment's pose is the face that alignment

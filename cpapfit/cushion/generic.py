@@ -6,7 +6,7 @@ from functools import lru_cache
 import numpy as np
 import trimesh
 
-from ..align.similarity import Similarity
+from ..similarity import Similarity
 from ..contact import Contact, template_curve
 from ..template import load_template
 from .nurbs import Cushion, CushionParams, design_cushion

@@ -12,7 +12,6 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError
 
 from ..scan import Scan
-from .fallback import one_per_cube
 
 FACING_COS = 0.1  # points whose normal turns further from the direction face away
 EDGE_FACTOR = 4.0
@@ -38,3 +37,9 @@ def facing_surface(cloud: Scan, axis: np.ndarray) -> Scan:
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     kept = triangles[longest <= EDGE_FACTOR * np.median(longest)]
     return replace(cloud, faces=kept.astype(np.int64))
+
+
+def one_per_cube(points: np.ndarray, cube_mm: float) -> np.ndarray:
+    """Indices (ascending) of the first of the (N, 3) points (mm) in each cube_mm cube they fall in."""
+    _, first = np.unique(np.floor(points / cube_mm).astype(np.int64), axis=0, return_index=True)
+    return np.sort(first)

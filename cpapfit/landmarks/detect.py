@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..align.similarity import Similarity, fit_similarity
+from ..similarity import Similarity, fit_similarity
 from ..errors import InputError
 from ..render import scene_of
 from ..scan import Intrinsics, Scan

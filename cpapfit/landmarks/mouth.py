@@ -15,7 +15,7 @@ kept, as each over-reads in its own way:
 
 import numpy as np
 
-from ..align.similarity import Similarity
+from ..similarity import Similarity
 from ..rgbd import backproject_pixels
 from ..scan import Intrinsics
 

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..align.similarity import Similarity
+from ..similarity import Similarity
 from ..landmarks.types import Landmarks
 from .frame import around_seal, place_name
 from .rim import has_pressure, loop_lengths, longest_run_mm

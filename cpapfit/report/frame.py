@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..align.similarity import Similarity
+from ..similarity import Similarity
 from ..frozen import freeze_arrays
 from ..landmarks.views import View
 from ..synthetic import TEMPLATE_TO_CAMERA

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
-from ..align.similarity import Similarity
+from ..similarity import Similarity
 from ..landmarks.types import Landmarks
 from ..synthetic import TEMPLATE_TO_CAMERA
 from ..render import raycast, scene_of, shade

@@ -10,7 +10,7 @@ import plotly.io as pio
 import trimesh
 from scipy.spatial import cKDTree
 
-from ..align.similarity import Similarity
+from ..similarity import Similarity
 from .figure import ColourScale
 from .frame import Face
 

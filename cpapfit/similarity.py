@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..frozen import freeze_arrays
+from .frozen import freeze_arrays
 
 TUKEY_C = 4.685  # biweight tuning constant (95 % efficiency for Gaussian residuals)
 MIN_SIGMA_MM = 1.0  # residual scale floor: landmarks within ~5 mm always count

@@ -12,11 +12,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from ..align.icp import icp_similarity
-from ..align.similarity import Similarity
+from ..landmarks.cloud import one_per_cube
+from ..landmarks.types import Landmarks
 from ..scan import Scan
+from ..similarity import Similarity
 from ..template import N_LANDMARKS, Template
-from .types import Landmarks
+from .icp import icp_similarity
 
 NOSE_TIP = 4
 CENTRAL_RADIUS_MM = 75.0  # template points this close to the nose tip take part
@@ -65,12 +66,6 @@ def starts(scan: Scan, template: Template) -> list[Similarity]:
 def thinned(points: np.ndarray, cube_mm: float) -> np.ndarray:
     """The (N, 3) points (mm) thinned to the first of each cube_mm cube they fall in, in their order."""
     return points[one_per_cube(points, cube_mm)]
-
-
-def one_per_cube(points: np.ndarray, cube_mm: float) -> np.ndarray:
-    """Indices (ascending) of the first of the (N, 3) points (mm) in each cube_mm cube they fall in."""
-    _, first = np.unique(np.floor(points / cube_mm).astype(np.int64), axis=0, return_index=True)
-    return np.sort(first)
 
 
 def fallback_alignment(scan: Scan, template: Template) -> tuple[Landmarks, Similarity]:
