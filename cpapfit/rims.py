@@ -13,6 +13,8 @@ a spacing of its edge.
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .tangents import across
+
 EDGE_NEIGHBOURS = 24
 EDGE_GAP_DEG = 120.0
 
@@ -59,11 +61,7 @@ def cloud_boundary(points: np.ndarray, normals: np.ndarray, chunk: int = 100_000
 def _wide_gap(points: np.ndarray, normals: np.ndarray, tree: cKDTree, at: np.ndarray, k: int) -> np.ndarray:
     idx = tree.query(points[at], k=k, workers=-1)[1]
     offsets = points[idx[:, 1:]] - points[at, None, :]
-    n = normals[at]
-    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(n, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(n, u)
+    u, v = across(normals[at])
     angles = np.sort(np.arctan2(np.einsum("nkj,nj->nk", offsets, v), np.einsum("nkj,nj->nk", offsets, u)), axis=1)
     gaps = np.diff(angles, axis=1, append=angles[:, :1] + 2 * np.pi)
     return gaps.max(axis=1) > np.radians(EDGE_GAP_DEG)

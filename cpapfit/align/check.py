@@ -35,6 +35,7 @@ from ..landmarks.cloud import facing_surface
 from ..scan import HEAD_MM, Scan
 from ..template import Template
 from ..similarity import Similarity
+from ..tangents import plane_across
 
 NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
 COVER_MM = 10.0
@@ -169,10 +170,7 @@ def first_surface(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray)
     across (from REACH_MM in front), NaN where fewer than half of them meet the surface."""
     if not len(surface.faces):
         return np.full(len(at), np.nan)
-    helper = np.eye(3)[np.argmin(np.abs(forward))]
-    u = np.cross(forward, helper)
-    u /= np.linalg.norm(u)
-    disc = _disc() @ np.stack([u, np.cross(forward, u)])
+    disc = _disc() @ plane_across(forward)
     origins = (at[:, None, :] + disc[None] + REACH_MM * forward).reshape(-1, 3)
     hits, ray, _ = surface.ray.intersects_location(origins, np.tile(-forward, (len(origins), 1)), multiple_hits=False)
     height = np.full(len(origins), np.nan)

@@ -15,7 +15,8 @@ from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from ..scan import Scan
-from .rim import across, skin_under
+from ..tangents import across
+from .rim import skin_under
 
 SPACINGS = 1.5  # on a coarse scan, data within this many point spacings counts as present
 CLOUD_REACH_MM = 5.0  # a rim point this near a cloud's nearest point (or SPACINGS local spacings) is measured to its tangent plane

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..frozen import freeze_arrays
+from ..tangents import across
 from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_thickness_mm
 
 SECTORS = 256
@@ -177,13 +178,6 @@ def _first_hit(points: np.ndarray, mesh: trimesh.Trimesh, directions: np.ndarray
     distance[ray[near]] = np.linalg.norm(loc[near] - points[ray[near]], axis=1)
     facing[ray] = np.einsum("ij,ij->i", mesh.face_normals[tri], directions[ray])
     return distance, facing
-
-
-def across(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two (K, 3) unit directions across (K, 3) unit axes, square to each other and to them."""
-    side = np.cross(axes, np.where(np.abs(axes[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    side /= np.linalg.norm(side, axis=1, keepdims=True)
-    return side, np.cross(axes, side)
 
 
 def skin_under(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float = REACH_MM) -> np.ndarray:
