@@ -33,13 +33,19 @@ def boundary_vertices(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     if len(faces) == 0:
         return out
     same = same_position(vertices)
-    n, faces = int(same.max()) + 1, same[faces]
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    keys, counts = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
-    lonely = np.zeros(n, dtype=bool)
-    lonely[keys[counts == 1] // n] = True
-    lonely[keys[counts == 1] % n] = True
+    edges, counts = edge_uses(same[faces])
+    lonely = np.zeros(int(same.max()) + 1, dtype=bool)
+    lonely[edges[counts == 1].ravel()] = True
     return lonely[same]
+
+
+def edge_uses(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((E, 2) the distinct edges of (M, 3) faces, each vertex pair ascending, in ascending order;
+    (E,) how many triangles use each)."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    n = int(faces.max()) + 1
+    keys, counts = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
+    return np.stack([keys // n, keys % n], axis=1), counts
 
 
 def grid_boundary(n_vertices: int, faces: np.ndarray) -> np.ndarray:

@@ -24,6 +24,7 @@ from ..synthetic import (
     camera_image, face_regions, place_in_view, random_intrinsics, random_light, sensor_depth, skin_tone, to_camera,
 )
 from ..render import raycast
+from ..rims import edge_uses
 from ..template import load_template
 from . import LOWER_INNER_LIP, IctModel, ict_face, load_ict, template_truth
 
@@ -81,7 +82,7 @@ def mouth_rim() -> np.ndarray:
     model = load_ict()
     tri = model.triangles[(model.triangles < model.face_vertices).all(axis=1)]
     directed = tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    edges, count = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
+    edges, count = edge_uses(tri)
     once = {tuple(e) for e in edges[count == 1]}
     rim = directed[[tuple(sorted(e)) in once for e in directed]]
     lips = model.neutral[model.landmarks[[62, 66]]].mean(axis=0)

@@ -7,12 +7,12 @@ import trimesh
 
 from ..errors import InputError
 from ..render import texels
-from ..rims import same_position
+from ..rims import edge_uses, same_position
 from ..scan import Scan
 from ..winding import wound_against
 from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
-from .surface import MIN_SHARED_EDGES, check_surface, edge_use
+from .surface import MIN_SHARED_EDGES, check_surface
 from .units import MM_PER_UNIT, decide_units
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
@@ -130,7 +130,7 @@ def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
     cloud with the corners or points at one position joined into one, its colour their mean (a
     texture is sampled at each corner first); any other mesh unchanged. A cloud's repeated points
     would hide its rims and its normals. Returns (vertices, faces, (colors, texture, uv))."""
-    if len(faces) and (edge_use(faces) == 2).mean() >= MIN_SHARED_EDGES:
+    if len(faces) and (edge_uses(faces)[1] == 2).mean() >= MIN_SHARED_EDGES:
         return vertices, faces, appearance
     colors, texture, uv = appearance
     rgb = colors / 255.0 if colors is not None else None

@@ -11,18 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..rims import edge_uses
 
 MIN_SHARED_EDGES = 0.5  # fraction of edges joining exactly two triangles
 MAX_NONMANIFOLD_EDGES = 0.05  # fraction of edges joining three or more
 MAX_DEGENERATE = 0.5  # fraction of triangles with no area
 DEGENERATE_AREA = 1e-12  # a triangle's area below this x the scan's extent squared is none
-
-
-def edge_use(faces: np.ndarray) -> np.ndarray:
-    """(E,) how many triangles use each distinct edge of (M, 3) faces."""
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    key = edges[:, 0] * (int(faces.max()) + 1) + edges[:, 1]
-    return np.unique(key, return_counts=True)[1]
 
 
 def check_surface(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
@@ -32,7 +26,7 @@ def check_surface(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     degenerate = float((area <= DEGENERATE_AREA * np.ptp(vertices, axis=0).max() ** 2).mean())
     if degenerate > MAX_DEGENERATE:
         raise InputError(f"{path}: {100 * degenerate:.0f} % of the triangles have no area (a degenerate mesh); re-export the scan")
-    use = edge_use(faces)
+    use = edge_uses(faces)[1]
     if (use > 2).mean() > MAX_NONMANIFOLD_EDGES:
         raise InputError(
             f"{path}: {100 * (use > 2).mean():.0f} % of the edges join three or more triangles (non-manifold); "
