@@ -61,6 +61,7 @@ from .evaluation.gap import SPACINGS, RimGap, data_reach, off_skin
 from .evaluation.rim import spacing
 from .in_front import IN_FRONT_MM, in_front_area_mm2
 from .landmarks.types import WITHOUT_COLOURS, Landmarks
+from .loops import longest_run
 from .proportions import Proportions
 from .scan import Scan
 from .template import load_template
@@ -188,15 +189,6 @@ def _gate(code: str, value: float, limits: tuple[float, float], what: str, advic
     return Gate(code, float(value), worse(value, flag_at), worse(value, refuse_at), message)
 
 
-def longest_run(bad: np.ndarray) -> int:
-    """Length of the longest run of True in a closed (K,) bool loop."""
-    if bad.all():
-        return len(bad)
-    start = int(np.argmin(bad))  # a False: no run wraps past it
-    runs = np.diff(np.flatnonzero(np.concatenate([[True], ~np.roll(bad, -start), [True]]))) - 1
-    return int(runs.max())
-
-
 def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact: Contact, rim: RimGap,
            shape: Proportions, by_shape: np.ndarray | None = None, params: QualityParams = QualityParams()) -> Quality:
     """The gates for the landmarks, the registration and the face's `shape` it gives, the seal it
@@ -208,7 +200,7 @@ def assess(scan: Scan, landmarks: Landmarks, registration: Registration, contact
     near = float(_has_data(scan, tree, registration.vertices[band], p.near_mm).mean())
     seal_gap = ~_has_data(scan, tree, contact.curve, p.near_mm)
     seal_mm = float(np.linalg.norm(contact.curve - np.roll(contact.curve, 1, axis=0), axis=1).sum())
-    hole = longest_run(seal_gap) * seal_mm / len(seal_gap)
+    hole = longest_run(seal_gap, np.ones(len(seal_gap)))[0] * seal_mm / len(seal_gap)
     matched = registration.residual[band][registration.valid[band]]
     residual = float(np.median(matched)) if len(matched) else np.inf
     off_rim = rim.worst_stretch_mm()

@@ -101,21 +101,10 @@ def raycast(vertices: np.ndarray, faces: np.ndarray, intrinsics: Intrinsics, fir
     r = rays[hit]
     t = np.einsum("ij,ij->i", normal, a) / np.einsum("ij,ij->i", normal, r)  # ray p = t * r, r_z = 1
     p = r * t[:, None]
-    bary[hit] = _barycentric(p, a, b, c)
+    bary[hit] = trimesh.triangles.points_to_barycentric(np.stack([a, b, c], axis=1), p)
     depth[hit] = t
     cos[hit] = np.abs(np.einsum("ij,ij->i", normal, dirs[hit]))
     return Hits(tri.reshape(shape), bary.reshape(*shape, 3), depth.reshape(shape), cos.reshape(shape))
-
-
-def _barycentric(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """(K, 3) barycentric coordinates of points p in triangles (a, b, c), all (K, 3)."""
-    v0, v1, v2 = b - a, c - a, p - a
-    d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((v0, v0), (v0, v1), (v1, v1)))
-    d20, d21 = np.einsum("ij,ij->i", v2, v0), np.einsum("ij,ij->i", v2, v1)
-    den = d00 * d11 - d01 * d01
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    return np.stack([1.0 - v - w, v, w], axis=1)
 
 
 def interpolate(hits: Hits, faces: np.ndarray, values: np.ndarray) -> np.ndarray:

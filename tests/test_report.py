@@ -17,7 +17,7 @@ from cpapfit.report.advice import Notice, gate_notices, landmark_notices, scan_n
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files
 from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
 from cpapfit.report.pictures import OPEN_RGB, rim_image
-from cpapfit.report.rim import longest_run_mm
+from cpapfit.loops import longest_run, loop_lengths
 
 from browser import CHROMIUM, Chromium
 
@@ -97,9 +97,9 @@ def test_longest_run_wraps_around_the_loop():
     flag = np.zeros(100, dtype=bool)
     flag[[95, 96, 97, 98, 99, 0, 1, 2, 3]] = True
     flag[40:43] = True
-    length, middle = longest_run_mm(loop, flag)
+    length, middle = longest_run(flag, loop_lengths(loop))
     assert length == pytest.approx(9 * 2 * np.pi * 50 / 100, rel=1e-3) and middle in (98, 99, 0)
-    assert longest_run_mm(loop, np.zeros(100, dtype=bool)) == (0.0, -1)
+    assert longest_run(np.zeros(100, dtype=bool), loop_lengths(loop)) == (0.0, -1)
 
 
 def test_holes_under_the_seal_and_low_confidence_are_warned(designed1):

@@ -8,7 +8,8 @@ import numpy as np
 from ..similarity import Similarity
 from ..landmarks.types import Landmarks
 from .frame import around_seal, place_name
-from .rim import has_pressure, loop_lengths, longest_run_mm
+from ..loops import longest_run, loop_lengths
+from .rim import has_pressure
 
 LOW_CONFIDENCE = 0.5  # a landmark below this weight disagrees with the others
 LOW_CONFIDENCE_SHARE = 0.2  # warn when more than this share of the landmarks is low
@@ -42,7 +43,7 @@ def gate_notices(fit: dict) -> list[Notice]:
 def scan_notices(curve: np.ndarray, on_scan: np.ndarray, similarity: Similarity, mask: str) -> list[Notice]:
     """Where the scan has no data under the seal curve (K, 3) mm with on_scan (K,) bool: a note to look
     at the contact picture (whether that calls for a rescan is the quality gates' to say)."""
-    hole_mm, middle = longest_run_mm(curve, ~on_scan)
+    hole_mm, middle = longest_run(~on_scan, loop_lengths(curve))
     if hole_mm <= HOLE_MM and on_scan.mean() >= SEAL_ON_SCAN:
         return []
     where = place_name(around_seal(curve, similarity)[middle], mask) if middle >= 0 else "the seal"
@@ -63,7 +64,7 @@ def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, ma
         (np.asarray(rim.open, dtype=bool), "is open (leaks)", "raise the headgear force or rescan"),
     ):
         if flag.any():
-            length, middle = longest_run_mm(rim.points, flag)
+            length, middle = longest_run(flag, loop_lengths(rim.points))
             out.append(Notice("check", f"The custom cushion {what} over {loop_lengths(rim.points)[flag].sum():.0f} mm of its rim "
                                        f"(longest stretch {length:.0f} mm, near {place_name(angle[middle], mask)}): {advice}."))
     return out

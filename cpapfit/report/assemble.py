@@ -23,7 +23,8 @@ from .advice import fit_notices, gate_notices, landmark_notices, scan_notices
 from .figure import ColourScale, zoned_cmap
 from .frame import Face, seal_view, shoot, whole_face_view
 from .page import Page, Picture, lookup, report_html
-from .rim import RimFit, loop_lengths
+from ..loops import loop_lengths
+from .rim import RimFit
 from .viewer import viewer_face, viewer_figure, viewer_html
 
 GAP_SCALE = ColourScale(colormaps["plasma"], 0.0, 3.0, "gap between rim and skin (mm)", ((1.0, "1 mm"),))

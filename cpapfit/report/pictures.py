@@ -17,7 +17,8 @@ from ..template import Template
 from .draw import draw_dots, draw_loop
 from .figure import FONT, ColourScale, panels_png, png
 from .frame import GREY_SKIN, Face, Shot, around_seal, face_view, place_name, shoot, to_pixels, whole_face_view
-from .rim import KPA_TO_MMHG, loop_lengths
+from ..loops import loop_lengths
+from .rim import KPA_TO_MMHG
 
 SKIN = np.array([0.85, 0.68, 0.58])
 REGION_COLOURS = {"nasal": np.array([0.15, 0.45, 0.95]), "oronasal": np.array([0.95, 0.3, 0.15])}

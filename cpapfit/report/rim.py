@@ -35,31 +35,3 @@ class RimFit:
 def has_pressure(rims: dict) -> bool:
     """True when every rim of {name: RimFit} carries pressure and open arrays."""
     return all(getattr(r, "pressure_kpa", None) is not None and getattr(r, "open", None) is not None for r in rims.values())
-
-
-def loop_lengths(points: np.ndarray) -> np.ndarray:
-    """(K,) mm length of rim attributed to each point of a closed loop (half of each adjacent segment)."""
-    seg = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1)
-    return 0.5 * (seg + np.roll(seg, 1))
-
-
-def longest_run_mm(points: np.ndarray, flag: np.ndarray) -> tuple[float, int]:
-    """(length mm, middle index) of the longest run of consecutive flagged points around a closed loop;
-    (0, -1) when none is flagged."""
-    if not flag.any():
-        return 0.0, -1
-    if flag.all():
-        return float(loop_lengths(points).sum()), 0
-    start = int(np.flatnonzero(~flag)[0])  # roll so that no run wraps past the end
-    order = np.roll(np.arange(len(flag)), -start)
-    f, lengths = flag[order], loop_lengths(points)[order]
-    best, best_mid, run, run_start = 0.0, -1, 0.0, 0
-    for i, on in enumerate(f):
-        if not on:
-            run = 0.0
-            continue
-        run_start = i if run == 0.0 else run_start
-        run += lengths[i]
-        if run > best:
-            best, best_mid = run, int(order[(run_start + i) // 2])
-    return float(best), best_mid
