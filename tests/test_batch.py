@@ -62,7 +62,7 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     (inp / "bad.ply").write_bytes(b"ply\nthis is no mesh\n")
     (inp / "notes.txt").write_text("not a scan")
 
-    code, _, err = cli("batch", inp, "--out", out, "--workers", 2, "--stock", "gauge")
+    code, _, err = cli("batch", inp, "--out", out, "--workers", 2, "--stock", "none")
     assert code == 1, err  # some failed
     rows = summary(out)
     assert sorted(rows) == ["bad", "p1", "p2"]  # notes.txt is no scan
@@ -71,8 +71,8 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     for name in ("p1", "p2"):
         assert rows[name]["status"] == "designed" and rows[name]["error"] == "" and float(rows[name]["time (s)"]) > 1
         manifest = written(out / name / "manifest.json")
-        assert manifest["hash"] == content_hash(ScanTask(inp / name, out / name, "nasal", stock="gauge"))
-        assert manifest["parameters"]["stock"] == "gauge" and written(out / name / "fit.json")["stock_fitting"]["sizes_best_first"]
+        assert manifest["hash"] == content_hash(ScanTask(inp / name, out / name, "nasal", stock=None))
+        assert manifest["parameters"]["stock"] is None and "stock_fitting" not in written(out / name / "fit.json")
         assert all((out / name / f).stat().st_size > 0 for f in manifest["files"])
         assert written(out / name / "fit.json")["mask"] == "nasal"
         assert trimesh.load(out / name / "cushion.stl").is_watertight
@@ -84,7 +84,7 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     before = stamps(out, ["p1", "p2"])
     (inp / "bad.ply").write_bytes(b"")  # still bad, differently: a retry gives the new error
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address, "--stock", "gauge")
+        code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address, "--stock", "none")
     assert code == 1, err
     rows = summary(out)
     assert [rows[n]["status"] for n in ("bad", "p1", "p2")] == ["failed", "unchanged", "unchanged"]
