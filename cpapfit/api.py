@@ -52,6 +52,7 @@ class DesignResult:
     design: Design
     scan: Scan
     files: dict = field(repr=False)
+    stock: str | None = "best"
 
     @property
     def fit(self) -> dict:
@@ -62,8 +63,6 @@ class DesignResult:
     def quality(self) -> dict:
         """The quality gates: rescan_advised, warnings and every gate's value."""
         return self.design.quality.record()
-
-    stock: str | None = "best"
 
     def save(self, folder: str | Path) -> Path:
         """Every file of the design and its manifest.json written into `folder` as one set
