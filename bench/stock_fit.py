@@ -22,7 +22,7 @@ from cpapfit.ict import load_ict
 from cpapfit.ict.phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.pipeline import face_for, place_template
-from cpapfit.stock_fit import COMFORT_N, best_stock, gauge_size
+from cpapfit.stock_fit import COMFORT_N, compared_stock
 from cpapfit.template import MASKS
 from ict_bench import ict_arguments, model_source, scan_of
 
@@ -46,12 +46,13 @@ def run(job: tuple[str, str, Path | None]) -> list[dict]:
     rows = []
     for mask in MASKS:
         t0 = time.perf_counter()
-        fits = best_stock(mask, face)
+        compared = compared_stock(mask, face, asleep=False)
+        fits = {f.size: f for f in compared.sizes}
         sizes = {size: {"offset_mm": list(f.offset_mm), "sealed": f.sealed, "force_n": f.fit.force_n,
                         **{k: f.fit.summary()[k] for k in ("leak_l_min", "pressure_max_kpa", "pressure_max_region",
                                                            "window_fraction", "rim_covered_fraction")}}
                  for size, f in fits.items()}
-        rows.append({"face": name, "mask": mask, "outcome": "fitted", "gauge": gauge_size(mask, placed.registration.vertices),
+        rows.append({"face": name, "mask": mask, "outcome": "fitted", "gauge": compared.gauge,
                      "best": next(iter(fits)), "sizes": sizes, "seconds": time.perf_counter() - t0})
     return rows
 

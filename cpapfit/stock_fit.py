@@ -105,6 +105,7 @@ class StockFitting:
 
     mask: str
     face: Face
+    gauge: str  # the size the gauge picks for this face
     seats: tuple  # ((size, Future of its StockFit), ...) in SIZES order
     params: CushionParams
     fit_params: FitParams
@@ -116,7 +117,7 @@ class StockFitting:
         done = {size: seated(mask, size, face, params, fit_params) if job.cancel() else job.result()
                 for size, job in reversed(self.seats)}  # from the end: the sizes the worker is least likely to have started
         sizes = tuple(sorted((done[size] for size, _ in self.seats), key=StockFit.rank))
-        compared = StockComparison(sizes, gauge_size(mask, np.asarray(face.registered.vertices)), ())
+        compared = StockComparison(sizes, self.gauge, ())
         gauge_fit = compared.gauge_fit
         if not asleep:
             return compared
@@ -129,12 +130,10 @@ def fitting_stock(mask: str, face: Face, choice: str = "best", params: CushionPa
                   fit_params: FitParams = FitParams(), submit: Callable = at_once) -> StockFitting:
     """The stock cushion of `mask` a clinic would fit on `face`, being seated: `choice` a size,
     "gauge" (the size the gauge picks) or "best" (every size, the best kept)."""
-    if choice == "best":
-        sizes = SIZES[mask]
-    else:
-        sizes = (gauge_size(mask, np.asarray(face.registered.vertices)) if choice == "gauge" else choice,)
+    gauge = gauge_size(mask, np.asarray(face.registered.vertices))
+    sizes = SIZES[mask] if choice == "best" else (gauge if choice == "gauge" else choice,)
     seats = tuple((size, submit(seated, mask, size, face, params, fit_params)) for size in sizes)
-    return StockFitting(mask, face, seats, params, fit_params, submit)
+    return StockFitting(mask, face, gauge, seats, params, fit_params, submit)
 
 
 def compared_stock(mask: str, face: Face, choice: str = "best", params: CushionParams = CushionParams(),
@@ -156,11 +155,6 @@ def gauge_size(mask: str, registered: np.ndarray) -> str:
     """The size (S, M or L) whose gauge measure lies nearest the face's, from its registered template (N, 3) mm."""
     measure, mean = gauge_mm(mask, registered), gauge_mm(mask, mean_face())
     return min(("S", "M", "L"), key=lambda s: abs(measure - mean * size_scale(mask, s)[0]))
-
-
-def best_stock(mask: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> dict[str, StockFit]:
-    """Every stock size of `mask` seated on `face`, best first (size -> StockFit)."""
-    return {f.size: f for f in compared_stock(mask, face, "best", params, fit_params, asleep=False).sizes}
 
 
 def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockFit:
