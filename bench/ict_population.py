@@ -46,7 +46,7 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.synthetic import FRAMED, to_camera
 from cpapfit.pipeline import design, place_template
-from cpapfit.proportions import proportions
+from cpapfit.quality.proportions import proportions
 from cpapfit.template import MASKS, load_template
 
 POINTS = (31, 33, 35, 36, 39, 42, 45, 48, 54)  # Multi-PIE: nose base, eye corners, mouth corners (no nose tip)

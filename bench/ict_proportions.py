@@ -22,7 +22,7 @@ from cpapfit.similarity import fit_similarity
 from cpapfit.ict import load_ict, template_truth
 from cpapfit.ict.phantom import random_subject
 from cpapfit.pipeline import place_template
-from cpapfit.proportions import proportions
+from cpapfit.quality.proportions import proportions
 from cpapfit.template import load_template
 from ict_population import FULL_MODEL, subject
 

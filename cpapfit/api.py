@@ -14,6 +14,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .align.nonrigid import NonrigidParams
 from .cushion.nurbs import CushionParams
 from .errors import InputError
 from .evaluation.fit import FitParams
@@ -25,19 +26,21 @@ from .outputs import design_files, report_files
 from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template
 from .pipeline import design as designed
 from .jobs import ScanTask, save_folder
-from .quality import QualityParams
+from .thresholds import QualityParams
 from .records import evaluate_record, manifest_record
 from .scan import Scan
 from .stock_fit import compared_stock
 
-__all__ = ["Params", "CushionParams", "FitParams", "QualityParams", "DesignResult", "load_scan", "phantom", "design", "evaluate"]
+__all__ = ["Params", "NonrigidParams", "CushionParams", "FitParams", "QualityParams", "DesignResult", "load_scan", "phantom", "design", "evaluate"]
 
 
 @dataclass(frozen=True)
 class Params:
-    """Every setting of a design in one place: the cushion's shape, the fit model, the quality
-    gates, and the stock cushion to compare with (a size, "gauge", "best" or None)."""
+    """Every setting of a design in one place: the template's registration, the cushion's shape, the
+    fit model, the quality gates' thresholds, and the stock cushion to compare with (a size,
+    "gauge", "best" or None)."""
 
+    registration: NonrigidParams = NonrigidParams()
     cushion: CushionParams = CushionParams()
     fit: FitParams = FitParams()
     quality: QualityParams = QualityParams()
@@ -88,7 +91,8 @@ def design(scan: Scan, mask: str = "nasal", landmarks: str | Path | None = None,
            report: bool = True) -> DesignResult:
     """`cpapfit design` of a loaded scan: `landmarks` a landmarks file (in the scan's units) to use
     instead of detection; `report` whether to draw report.html and its pictures."""
-    d = designed(scan, mask, user_landmarks(landmarks, scan), params.cushion, params.fit, stock=params.stock, quality=params.quality)
+    d = designed(scan, mask, user_landmarks(landmarks, scan), params.cushion, params.fit, stock=params.stock, quality=params.quality,
+                 registration=params.registration)
     files = design_files(d, scan)
     return DesignResult(d, scan, files | (report_files(d, scan, files) if report else {}), params.stock)
 
@@ -102,7 +106,7 @@ def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False
     `states` every state of the sleeping face. The fit.json record."""
     if (generic or stock or states) and not mask:
         raise InputError("generic, stock and states need the mask (nasal or oronasal): which cushion to compare with, which states to press")
-    placed = place_template(scan, user_landmarks(landmarks, scan))
+    placed = place_template(scan, user_landmarks(landmarks, scan), params=params.registration, quality=params.quality)
     face = face_for(scan, placed.alignment, placed.registration)
     cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
     fits = evaluated(face, cushions, params.cushion, params.fit, force_n)

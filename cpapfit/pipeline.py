@@ -23,8 +23,9 @@ from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import StateFit, fit_states, sleep_states
 from .export import SolidError, check_closed, check_solid
 from .mould import mould
-from .proportions import proportions
-from .quality import Quality, QualityParams, assess, require_quality
+from .quality.proportions import proportions
+from .quality.gates import Quality, assess, require_quality
+from .thresholds import QualityParams
 from .similarity import Similarity
 from .landmarks.types import Landmarks
 from .metrics import mask_region
@@ -33,9 +34,6 @@ from .stock_fit import StockComparison, fitting_stock
 from .template import load_template
 from .work import at_once
 
-STRAY_MM = QualityParams().detected_spread_refuse_mm  # detected landmarks this far (median) from the registered face: dropped
-DOUBT_MM = QualityParams().cross_check_spread_mm  # ... this far: cross-checked against the face's shape alone
-APART_MM = QualityParams().shape_apart_drop_mm  # ... and their seal band this far (mean) from the shape's: dropped
 
 
 @dataclass(frozen=True)
@@ -66,55 +64,61 @@ def template_basis(modes: int) -> ShapeBasis:
     return ict_basis(template.vertices, template.faces, modes)
 
 
-def registered(scan: Scan, alignment: Alignment) -> tuple[Alignment, Registration, np.ndarray | None]:
+def registered(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams(),
+               quality: QualityParams = QualityParams()) -> tuple[Alignment, Registration, np.ndarray | None]:
     """Stage nonrigid: the alignment it kept, its registration, and, when detected landmarks are
     doubtful, the template registered from the face's shape alone ((n, 3) mm) for the quality gates
     to compare (else None). Detected landmarks are dropped for the landmark-free alignment, if that
-    passes the face check, when they lie a median over STRAY_MM from their places on the registered
-    face (a colour image not registered to its depth: the quality gates would refuse them), or when,
-    doubtful, they place the mask region over APART_MM from the shape's (`_cross_checked`)."""
-    reg = register_template(scan, alignment)
+    passes the face check, when they lie a median over `quality.detected_spread_refuse_mm` from their
+    places on the registered face (a colour image not registered to its depth: the quality gates
+    would refuse them), or when, doubtful, they place the mask region over
+    `quality.shape_apart_drop_mm` from the shape's (`_cross_checked`)."""
+    reg = register_template(scan, alignment, params)
     lm = alignment.landmarks
-    if lm.path == "user" or not reg.landmark_spread_mm > STRAY_MM:
-        return _cross_checked(scan, alignment, reg)
+    if lm.path == "user" or not reg.landmark_spread_mm > quality.detected_spread_refuse_mm:
+        return _cross_checked(scan, alignment, reg, params, quality)
     why = f"the landmarks found by {lm.path} lay a median {reg.landmark_spread_mm:.1f} mm from their places on the registered face"
-    return *(_by_shape(scan, "; ".join(filter(None, (lm.rejected, why)))) or (alignment, reg)), None
+    return *(_by_shape(scan, "; ".join(filter(None, (lm.rejected, why))), params) or (alignment, reg)), None
 
 
-def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration) -> tuple[Alignment, Registration] | None:
+def placed_by_shape(scan: Scan, alignment: Alignment, reg: Registration, params: NonrigidParams = NonrigidParams(),
+                    quality: QualityParams = QualityParams()) -> tuple[Alignment, Registration] | None:
     """The template aligned and registered from the face's shape alone, when detected landmarks lie a
-    median over DOUBT_MM (and at most STRAY_MM: else `registered` has tried it) from their places on
-    the registered face, and the shape alone places it; else None."""
-    if alignment.landmarks.path not in ("image", "render") or not DOUBT_MM < reg.landmark_spread_mm <= STRAY_MM:
+    median over `quality.cross_check_spread_mm` (and at most `quality.detected_spread_refuse_mm`: else
+    `registered` has tried it) from their places on the registered face, and the shape alone places
+    it; else None."""
+    doubt, stray = quality.cross_check_spread_mm, quality.detected_spread_refuse_mm
+    if alignment.landmarks.path not in ("image", "render") or not doubt < reg.landmark_spread_mm <= stray:
         return None
-    return _by_shape(scan, "")
+    return _by_shape(scan, "", params)
 
 
-def _cross_checked(scan: Scan, alignment: Alignment, reg: Registration) -> tuple[Alignment, Registration, np.ndarray | None]:
+def _cross_checked(scan: Scan, alignment: Alignment, reg: Registration, params: NonrigidParams,
+                   quality: QualityParams) -> tuple[Alignment, Registration, np.ndarray | None]:
     """Doubtful detected landmarks checked against the face's shape alone (`placed_by_shape`). When
-    the two place the mask region (both masks' seal bands) over APART_MM apart (mean; fran, whose
-    landmarks are right, reads up to 7.5), the landmarks have dragged the template off the face and
-    are dropped for the shape's alignment and registration, with nothing left to compare."""
-    shape = placed_by_shape(scan, alignment, reg)
+    the two place the mask region (both masks' seal bands) over `quality.shape_apart_drop_mm` apart
+    (mean; fran, whose landmarks are right, reads up to 7.5), the landmarks have dragged the template
+    off the face and are dropped for the shape's alignment and registration, with nothing left to compare."""
+    shape = placed_by_shape(scan, alignment, reg, params, quality)
     if shape is None:
         return alignment, reg, None
     region = mask_region(load_template())
     apart = float(np.linalg.norm(reg.vertices[region] - shape[1].vertices[region], axis=1).mean())
-    if apart <= APART_MM:
+    if apart <= quality.shape_apart_drop_mm:
         return alignment, reg, shape[1].vertices
     lm = alignment.landmarks
     why = f"the landmarks found by {lm.path} placed the mask region a mean {apart:.1f} mm from where the face's shape alone places it"
     return replace(shape[0], landmarks=replace(shape[0].landmarks, rejected="; ".join(filter(None, (lm.rejected, why))))), shape[1], None
 
 
-def _by_shape(scan: Scan, rejected: str) -> tuple[Alignment, Registration] | None:
+def _by_shape(scan: Scan, rejected: str, params: NonrigidParams) -> tuple[Alignment, Registration] | None:
     """The landmark-free alignment (saying what was `rejected` for it) and its registration, or None
     if it fails the face check."""
     instead = landmark_free_alignment(scan, load_template(), rejected)
     if instead is None:
         return None
     alignment = Alignment(*instead)
-    return alignment, register_template(scan, alignment)
+    return alignment, register_template(scan, alignment, params)
 
 
 @dataclass(frozen=True)
@@ -157,28 +161,32 @@ class Placement:
     by_shape: np.ndarray | None
 
 
-def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage: Callable[[str], None] = _silent) -> Placement:
-    """Stages landmarks, similarity and nonrigid: the template aligned and registered on a scan."""
+def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage: Callable[[str], None] = _silent,
+                   params: NonrigidParams = NonrigidParams(), quality: QualityParams = QualityParams()) -> Placement:
+    """Stages landmarks, similarity and nonrigid: the template aligned and registered on a scan
+    (`params`: the registration's; `quality`: the thresholds deciding which landmarks it keeps)."""
     on_stage("landmarks and similarity")
     al = align(scan, user_landmarks)
     on_stage("non-rigid registration")
-    return Placement(*registered(scan, al))
+    return Placement(*registered(scan, al, params, quality))
 
 
 def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
     fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
     placement: Placement | None = None, stock: str | None = "best", quality: QualityParams = QualityParams(),
+    registration: NonrigidParams = NonrigidParams(),
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
     cushion onto the face awake and asleep, beside the stock cushion a clinic would fit
     (`fitting_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
     is called as each stage starts; the stock sizes are seated by `submit` (`work.py`), alongside
-    the design when that is a worker process's. `quality`: the gates' thresholds.
+    the design when that is a worker process's. `quality`: the gates' thresholds; `registration`: the
+    nonrigid registration's parameters.
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
-    placement = placement or place_template(scan, user_landmarks, on_stage)
+    placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality)
     al, reg, by_shape = placement.alignment, placement.registration, placement.by_shape
     on_stage("contact")
     face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below

@@ -9,7 +9,6 @@ import trimesh
 from .frozen import freeze_arrays
 from .rims import boundary_vertices, cloud_boundary, grid_boundary
 
-HEAD_MM = 600.0  # the largest robust extent (mm) of a scan of a face, or of the whole head: more is a bust or a scene
 
 
 def robust_extent(vertices: np.ndarray) -> float:

@@ -7,12 +7,12 @@ from scipy.spatial import cKDTree
 
 from cpapfit.align.nonrigid import Registration
 from cpapfit.errors import QualityError
-from cpapfit.in_front import in_front_area_mm2
+from cpapfit.quality.in_front import in_front_area_mm2
 from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
 from cpapfit.synthetic import FRAMED, make_phantom
 from cpapfit.pipeline import design
-from cpapfit.quality import QualityParams
+from cpapfit.thresholds import QualityParams
 from cpapfit.template import load_template
 
 SEED = 102

@@ -25,6 +25,7 @@ from cpapfit.metrics import mask_region, surface_distance
 from cpapfit.synthetic import KINECT_V1, make_phantom
 from cpapfit.scan import Intrinsics, Scan
 from cpapfit.template import central_face, load_template
+from cpapfit.thresholds import QualityParams
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)
@@ -500,7 +501,7 @@ def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, p
     assert np.linalg.norm(reg.vertices[REGION] - phantom1.surface[REGION], axis=1).mean() <= 1.0
     monkeypatch.setattr(pipeline, "landmark_free_alignment", lambda *args: None)  # the shape alone is no face
     kept, reg, _ = registered(scan, stray)
-    assert kept is stray and reg.landmark_spread_mm > pipeline.STRAY_MM  # kept, for the quality gates to refuse
+    assert kept is stray and reg.landmark_spread_mm > QualityParams().detected_spread_refuse_mm  # kept, for the quality gates to refuse
 
 
 def bare_subject(tmp_path, seed: int, turned: int):

@@ -14,7 +14,8 @@ from cpapfit.landmarks.mouth import _gap_in_depth
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.synthetic import FRAMED, make_phantom
 from cpapfit.pipeline import align, design, place_template
-from cpapfit.quality import QualityParams, _mouth_gates
+from cpapfit.quality.gates import _mouth_gates
+from cpapfit.thresholds import QualityParams
 from cpapfit.scan import Intrinsics, Scan
 from cpapfit.template import load_template
 

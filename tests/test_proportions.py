@@ -10,8 +10,10 @@ from scipy.spatial.transform import Rotation
 from cpapfit.align.nonrigid import Registration
 from cpapfit.similarity import Similarity
 from cpapfit.pipeline import placed_by_shape
-from cpapfit.proportions import MIN_MATCHED, Proportions, proportions
-from cpapfit.quality import QualityParams, _shape_gates
+from cpapfit.quality.proportions import Proportions, proportions
+from cpapfit.thresholds import MIN_MATCHED
+from cpapfit.quality.gates import _shape_gates
+from cpapfit.thresholds import QualityParams
 from cpapfit.template import load_template
 
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from cpapfit.quality import QualityParams
+from cpapfit.thresholds import QualityParams
 
 GATES_PAGE = Path(__file__).resolve().parent.parent / "docs" / "quality_gates.md"
 # (gate code, words its row starts with) -> the QualityParams fields of its (flagged, refused) thresholds

@@ -30,9 +30,10 @@ from cpapfit.io.write import write_files
 from cpapfit.synthetic import SensorModel, make_phantom, with_colour_shift, with_holes
 from cpapfit.evaluation.gap import RimGap
 from cpapfit.errors import QualityError
-from cpapfit.proportions import proportions
+from cpapfit.quality.proportions import proportions
 from cpapfit.loops import longest_run
-from cpapfit.quality import QualityParams, assess, require_quality
+from cpapfit.quality.gates import assess, require_quality
+from cpapfit.thresholds import QualityParams
 from cpapfit.template import load_template
 
 GATES = QualityParams()
@@ -296,7 +297,7 @@ def test_the_advice_blames_a_meshs_colours_only_when_the_landmarks_were_found_on
     """Detected landmarks far from the geometry on a coloured mesh: found on its coloured renders,
     the advice names the colours; found on its renders drawn without them, the shaded render."""
     from cpapfit.landmarks.types import WITHOUT_COLOURS, Landmarks
-    from cpapfit.quality import _spread_gate
+    from cpapfit.quality.gates import _spread_gate
     from cpapfit.scan import Scan
 
     box = trimesh.creation.box((100, 100, 100))
@@ -316,7 +317,7 @@ def test_a_decimated_meshs_sparse_flat_parts_have_scan_data_and_its_holes_have_n
     none."""
     from scipy.spatial import cKDTree
 
-    from cpapfit.quality import _has_data
+    from cpapfit.quality.gates import _has_data
     from cpapfit.scan import Scan
 
     grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)
@@ -338,7 +339,7 @@ def test_a_depth_image_riddled_with_small_holes_has_data_only_near_its_pixels():
     data (by the islands' own one-sided neighbourhoods it would: their local spacing reads 3.7 mm)."""
     from scipy.spatial import cKDTree
 
-    from cpapfit.quality import _has_data
+    from cpapfit.quality.gates import _has_data
     from cpapfit.scan import Scan
 
     grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.0), np.arange(-40, 41, 1.0)), -1).reshape(-1, 2)

@@ -32,10 +32,11 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..landmarks.cloud import facing_surface
-from ..scan import HEAD_MM, Scan
+from ..scan import Scan
 from ..template import Template
 from ..similarity import Similarity
 from ..tangents import plane_across
+from ..thresholds import HEAD_MM, MIN_COVERAGE, MAX_MEDIAN_GAP_MM, MIN_RIDGE_MM, MIN_BELOW_MM, LOW_NOSE_MM, SCALE_RANGE, MAX_TURNED_DEG
 
 NOSE_TIP, RIGHT_ALA, LEFT_ALA = 4, 129, 358
 COVER_MM = 10.0
@@ -45,15 +46,6 @@ PEAK_SEARCH_MM = 15.0
 PEAK_LAYER_MM = 2.0  # the nose tip: the middle of the scan's top layer this thick
 PROBE_MM = 4.0  # across each probe's bundle of rays
 REACH_MM = 200.0  # the probing rays start this far in front of the face
-
-# Thresholds: a face passes all of them.
-MIN_COVERAGE = 0.5
-MAX_MEDIAN_GAP_MM = 3.5
-MIN_RIDGE_MM = 6.0
-MIN_BELOW_MM = 8.0
-LOW_NOSE_MM = 2.5  # a nose this high above its sides and below, short of the two above, passes with a second look's agreement
-SCALE_RANGE = (0.7, 1.4)
-MAX_TURNED_DEG = 90.0
 
 
 @dataclass(frozen=True)

@@ -15,16 +15,9 @@ from .fallback import fallback_alignment
 from ..landmarks.types import WITHOUT_COLOURS, Landmarks
 from .check import FaceCheck, check_face, require_face
 from ..similarity import Similarity, fit_similarity
+from ..thresholds import FRONT_SIZE, DISAGREE_MM
 
 
-# A face found on renders framed by the landmark-free alignment's pose is the face that alignment
-# found: its size within this factor of it (48 synthetic meshes and clouds: 0.91-1.10; fran as a
-# bare STL, whose shape alone overstates its size: 0.86; a bare mesh's shaded render once gave a
-# "face" at 0.75 that passed the face check, 15 mm off).
-FRONT_SIZE = 1.25
-# A detection failing the face check and the shape's own placement this far apart (mean, mm, over both
-# masks' contact bands): one of them is on the wrong part of the face, and the design is refused.
-DISAGREE_MM = 10.0
 # A capture's second look, only to agree or not with its image's low-nosed face (`_agreed`): MediaPipe
 # on a render of its depth, without colours, from in front of that face.
 SECOND_LOOK = "a render of the depth" + WITHOUT_COLOURS

@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 from ..frozen import freeze_arrays
 from ..landmarks.types import Landmarks
 from ..scan import Scan
+from ..thresholds import USER_TRUST_MM
 from .affine import AffineParams, apply_affine, fit_affine, starts_from
 from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
@@ -82,7 +83,7 @@ class NonrigidParams:
     correspondence: str = "auto"
     min_landmark_confidence: float = 0.5
     detected_landmark_factor: float = 0.1
-    user_trust_mm: float = 2.2
+    user_trust_mm: float = USER_TRUST_MM
     affine: AffineParams | None = AffineParams()
     morphable: MorphableParams | None = MorphableParams()
     coarse_gates: tuple[float, float] | None = (15.0, 60.0)

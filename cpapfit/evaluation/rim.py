@@ -20,6 +20,7 @@ from ..errors import InputError
 from ..frozen import freeze_arrays
 from ..tangents import across
 from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_thickness_mm
+from ..thresholds import MIN_COVERED
 
 SECTORS = 256
 REFINE_MM = 1.0  # longest cushion edge after refinement
@@ -30,7 +31,6 @@ TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's ri
 FACE_MM = 4.0  # scanned skin farther than this behind the registered face along the ray: a hole in the scan
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
-MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
 RIM_BAND_MM = 15.0  # a rim point is a wall vertex at most this far up the axis from its sector's lowest
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)

@@ -15,10 +15,9 @@ from ..errors import InputError
 from ..rgbd import backproject, grid_triangles
 from ..scan import Intrinsics, Scan
 from .write import json_bytes, png_bytes
+from ..thresholds import MIN_VALID_PIXELS, DEPTH_RANGE_MM
 
 COLOR_NAMES = ("color.png", "color.jpg", "color.jpeg")
-DEPTH_RANGE_MM = (100.0, 2000.0)  # depth outside this range is treated as invalid
-MIN_VALID_PIXELS = 500
 
 
 def is_capture(path: Path) -> bool:

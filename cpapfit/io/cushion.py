@@ -7,8 +7,8 @@ import trimesh
 
 from ..errors import InputError, UnitsError
 from .mesh import read_geometry
+from ..thresholds import CUSHION_SIZE_MM
 
-SIZE_MM = (20.0, 250.0)  # a cushion's largest extent, nasal to full-face
 
 
 def load_cushion(path: Path) -> trimesh.Trimesh:
@@ -19,9 +19,9 @@ def load_cushion(path: Path) -> trimesh.Trimesh:
     if not np.isfinite(geom.vertices).all():
         raise InputError(f"{path}: the cushion has NaN or infinite vertices")
     size = float(np.ptp(geom.vertices, axis=0).max())
-    if not SIZE_MM[0] <= size <= SIZE_MM[1]:
+    if not CUSHION_SIZE_MM[0] <= size <= CUSHION_SIZE_MM[1]:
         raise UnitsError(
             f"{path}: the cushion is {size:.4g} units across; cpapfit reads cushions in millimetres "
-            f"({SIZE_MM[0]:.0f}-{SIZE_MM[1]:.0f} mm), in the scan's frame as `cpapfit design` writes them"
+            f"({CUSHION_SIZE_MM[0]:.0f}-{CUSHION_SIZE_MM[1]:.0f} mm), in the scan's frame as `cpapfit design` writes them"
         )
     return geom

@@ -12,8 +12,8 @@ from ..landmarks.types import Landmarks
 from ..scan import Scan
 from ..template import load_template
 from .units import MM_PER_UNIT
+from ..thresholds import MIN_USER_LANDMARKS
 
-MIN_LANDMARKS = 4
 
 
 def user_landmarks(path: str | Path | None, scan: Scan) -> Landmarks | None:
@@ -45,8 +45,8 @@ def read_landmarks(path: Path, units: str, n_template: int) -> Landmarks:
         raise InputError(f"{path}: template_index {bad[0]} does not exist (the template has {n_template} vertices; Face Mesh landmarks are 0-467)")
     if len(np.unique(index)) != len(index):
         raise InputError(f"{path}: a template_index appears twice")
-    if len(index) < MIN_LANDMARKS:
-        raise InputError(f"{path}: {len(index)} landmarks; at least {MIN_LANDMARKS} are needed to place the template")
+    if len(index) < MIN_USER_LANDMARKS:
+        raise InputError(f"{path}: {len(index)} landmarks; at least {MIN_USER_LANDMARKS} are needed to place the template")
     points = points * MM_PER_UNIT[units]
     return Landmarks(points, index, np.ones(len(index)), "user", f"user landmarks from {path.name}",
                      lips_apart_mm=lips_apart_in_points(points, index))

@@ -14,9 +14,8 @@ import re
 from pathlib import Path
 
 from ..errors import InputError
+from ..thresholds import MAX_VERTICES, MAX_TRIANGLES
 
-MAX_VERTICES = 2_000_000
-MAX_TRIANGLES = 4_000_000
 STL_HEADER, STL_TRIANGLE = 84, 50  # binary STL: 80-byte header + uint32 count, 50 bytes a triangle
 CHUNK = 1 << 24
 

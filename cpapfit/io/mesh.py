@@ -14,9 +14,9 @@ from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
 from .surface import MIN_SHARED_EDGES, check_surface
 from .units import MM_PER_UNIT, decide_units
+from ..thresholds import MIN_VERTICES
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
-MIN_VERTICES = 100
 
 
 def load_mesh_scan(path: Path, units: str = "auto") -> Scan:

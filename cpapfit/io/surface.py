@@ -12,11 +12,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..rims import edge_uses
+from ..thresholds import MIN_SHARED_EDGES, MAX_NONMANIFOLD_EDGES, MAX_DEGENERATE, DEGENERATE_AREA
 
-MIN_SHARED_EDGES = 0.5  # fraction of edges joining exactly two triangles
-MAX_NONMANIFOLD_EDGES = 0.05  # fraction of edges joining three or more
-MAX_DEGENERATE = 0.5  # fraction of triangles with no area
-DEGENERATE_AREA = 1e-12  # a triangle's area below this x the scan's extent squared is none
 
 
 def check_surface(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:

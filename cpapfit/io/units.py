@@ -3,7 +3,8 @@
 import numpy as np
 
 from ..errors import UnitsError
-from ..scan import HEAD_MM, robust_extent
+from ..scan import robust_extent
+from ..thresholds import BUST_EXTENT_MM, FACE_EXTENT_MM
 
 MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "um": 0.001, "in": 25.4}
 UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "um": "micrometres", "in": "inches"}
@@ -11,11 +12,6 @@ UNIT_NAMES = {"mm": "millimetres", "cm": "centimetres", "m": "metres", "um": "mi
 # centimetres too: inches must be stated.
 AUTO_UNITS = ("mm", "cm", "m", "um")
 UNIT_CHOICES = ("auto", *MM_PER_UNIT)  # what --units takes
-# Largest robust extent of a scan of a face (and at most the head), in mm.
-FACE_EXTENT_MM = (70.0, HEAD_MM)
-# ... of a scan with more than the face in it (head, shoulders, chest), in mm: taken when stated, and
-# by auto in mm, m or um, where it cannot be mistaken for a face in another unit.
-BUST_EXTENT_MM = (HEAD_MM, 2000.0)
 BUST_UNITS = ("mm", "m", "um")
 
 

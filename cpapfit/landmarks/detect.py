@@ -25,16 +25,14 @@ from .lift import lift
 from .mouth import lips_apart_mm
 from .types import Landmarks
 from .views import axis_views, face_view, render_view
+from ..thresholds import MIN_LANDMARKS, MIN_INLIERS, TWO_FACES_APART
 
-MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
-MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the similarity
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
 FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
 # A frontal render is upright: its face is taken as MediaPipe sees it unturned, if it sees one (a
 # face turned 90 deg can fit the template with less RMS and be mm off: fran as a float64 PLY);
 # the image turned is tried only when it sees none.
 UPRIGHT, TURNED = (0,), (1, 2, 3)
-TWO_FACES_APART = 0.5  # two detections whose centres are farther apart than this x face size are two faces
 RENDER_THREADS = 2  # a mesh's axis views are rendered this many at a time (Embree and numpy release the GIL)
 
 

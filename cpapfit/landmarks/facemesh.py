@@ -10,9 +10,9 @@ import sys
 from functools import lru_cache
 
 import numpy as np
+from ..thresholds import MIN_DETECTION_CONFIDENCE
 
 MAX_FACES = 2  # to notice a second face, not to use it
-MIN_DETECTION_CONFIDENCE = 0.5
 
 
 @contextlib.contextmanager

@@ -4,10 +4,9 @@ import numpy as np
 
 from ..rgbd import backproject_pixels
 from ..scan import Intrinsics
+from ..thresholds import LIFT_MIN_VALID_FRACTION, LIFT_MAX_SPREAD_MM
 
 RADIUS_PX = 2  # 5x5 window
-MIN_VALID_FRACTION = 0.4
-MAX_SPREAD_MM = 6.0  # a window straddling a depth edge (spread of valid depths) is not trusted
 
 
 def lift(uv: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics, radius: int = RADIUS_PX):
@@ -28,7 +27,7 @@ def lift(uv: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics, radius: i
     ranked, count = np.sort(window, axis=1), np.isfinite(window).sum(axis=1)
     z = row_median(ranked, count)
     spread = row_percentile(ranked, count, 90) - row_percentile(ranked, count, 10)
-    ok = (count / window.shape[1] >= MIN_VALID_FRACTION) & np.isfinite(z) & (spread <= MAX_SPREAD_MM)
+    ok = (count / window.shape[1] >= LIFT_MIN_VALID_FRACTION) & np.isfinite(z) & (spread <= LIFT_MAX_SPREAD_MM)
     points = backproject_pixels(uv, z, intrinsics)
     points[~ok] = np.nan
     return points, ok

@@ -10,11 +10,8 @@ from ..landmarks.types import Landmarks
 from .frame import around_seal, place_name
 from ..loops import longest_run, loop_lengths
 from .rim import has_pressure
+from ..thresholds import LOW_CONFIDENCE, LOW_CONFIDENCE_SHARE, HOLE_MM, SEAL_ON_SCAN
 
-LOW_CONFIDENCE = 0.5  # a landmark below this weight disagrees with the others
-LOW_CONFIDENCE_SHARE = 0.2  # warn when more than this share of the landmarks is low
-HOLE_MM = 8.0  # warn when the scan has no data under a longer stretch of the seal
-SEAL_ON_SCAN = 0.9  # warn when less of the seal curve lies on scan data
 
 
 @dataclass(frozen=True)
@@ -36,7 +33,7 @@ def landmark_notices(landmarks: Landmarks) -> list[Notice]:
 
 
 def gate_notices(fit: dict) -> list[Notice]:
-    """The quality gates' warnings from fit.json (`quality.py`): the one place that decides "rescan advised"."""
+    """The quality gates' warnings from fit.json (`quality/gates.py`): the one place that decides "rescan advised"."""
     return [Notice("rescan", w["message"][:1].upper() + w["message"][1:] + ".") for w in fit.get("warnings", [])]
 
 

@@ -11,11 +11,11 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from .align.nonrigid import Registration
-from .evaluation.rim import spacing
-from .template import Template
+from ..align.nonrigid import Registration
+from ..evaluation.rim import spacing
+from ..template import Template
+from ..thresholds import IN_FRONT_MM
 
-IN_FRONT_MM = 5.0  # scan this far out from the registered face is not skin
 # The middle of the face: template vertices this close to the eye corners, nasion, nose tip, lips and chin.
 MIDDLE_LANDMARKS = (33, 133, 263, 362, 168, 4, 0, 17, 152)
 MIDDLE_RADIUS_MM = 30.0

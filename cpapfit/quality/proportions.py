@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .align.nonrigid import Registration
-from .similarity import Similarity
+from ..align.nonrigid import Registration
+from ..similarity import Similarity
+from ..thresholds import MIN_MATCHED
 
-MIN_MATCHED = 200  # fewer vertices on the scan than this cannot fix the map's 12 unknowns robustly
 
 
 @dataclass(frozen=True)

@@ -54,92 +54,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .align.nonrigid import NonrigidParams, Registration
-from .contact import Contact
-from .errors import QualityError
-from .evaluation.gap import SPACINGS, RimGap, data_reach, off_skin
-from .evaluation.rim import spacing
-from .in_front import IN_FRONT_MM, in_front_area_mm2
-from .landmarks.types import WITHOUT_COLOURS, Landmarks
-from .loops import longest_run
+from ..align.nonrigid import Registration
+from ..contact import Contact
+from ..errors import QualityError
+from ..evaluation.gap import SPACINGS, RimGap, data_reach, off_skin
+from ..evaluation.rim import spacing
+from .in_front import in_front_area_mm2
+from ..landmarks.types import WITHOUT_COLOURS, Landmarks
+from ..loops import longest_run
 from .proportions import Proportions
-from .scan import Scan
-from .template import load_template
-
-
-@dataclass(frozen=True)
-class QualityParams:
-    """Thresholds of the gates. Past *_flag: "rescan advised" (fit.json, report); past *_refuse: no design.
-
-    near_mm: scan data this close (mm) counts as present (coverage, hole; landmarks on the skin); for
-        a coarse scan 1.5 times its point spacing if that is more (a point between vertices is that
-        far from one): a depth image's pixel pitch, a mesh's or cloud's spacing there, at most 10 mm
-        (`_reach`).
-    coverage_*: fraction of the seal band with scan data (bad below).
-    hole_*_mm: longest stretch of the seal over a hole, mm along the seal (bad above).
-    residual_*_mm: median registration residual over the seal band, mm (bad above).
-    landmarks_*_mm: median distance of the landmarks from the scanned skin, mm (bad above).
-    landmark_spread_*_mm: a user's landmarks' median distance along the face from their places on
-        it, mm (bad above); flagged where the registration stops trusting them.
-    detected_spread_*_mm: the same for detected landmarks, mm (bad above).
-    cross_check_spread_mm: detected landmarks with a spread above this (mm) are cross-checked against
-        the face's shape alone: the detector's own error gives 2-5 mm on captures (one synthetic
-        subject of 50 at 5.08), fran 4.4-4.8, bare meshes 3.4-6.3.
-    shape_apart_*_mm: mean distance (mm) between the seal bands the landmarks and the shape alone
-        place (bad above; never refused: the shape alone ends ~1 mm from the truth, so 1.5 mm apart may
-        be 2 mm off); past shape_apart_drop_mm the landmarks are dropped.
-    rim_gap_*_mm: the cushion rim's largest gap to the scanned skin over ~9 mm of rim (running
-        median, `RimGap.worst_stretch_mm`), mm (bad above): where the scan has data the rim sits on
-        it by construction (<= 0.6 mm), unless the template missed the face there.
-    small_face_* / large_face_*: the face's size against the template's (`Proportions.size`, bad
-        below / above).
-    flat_face_* / deep_face_*: its depth for its breadth against the template's
-        (`Proportions.depth_ratio`, bad below / above).
-    in_front_*_mm2: area of scan over 5 mm in front of the middle of the registered face, mm² (bad
-        above): 0 on synthetic subjects and the shared real scans, 198-349 with a thin glasses frame.
-    lips_apart_*_mm: how far apart the lips are (`landmarks/mouth.py`), mm (bad above; oronasal
-        masks only): closed mouths read 0-0.8 mm on synthetic captures, 0-5.3 mm on the same as
-        meshes (holes along the lips' crease; 6.5 on a partial view pitched 23°), 0 on the shared
-        real scans.
-    Calibrated on synthetic subjects (bench/RESULTS.md): clean subjects are never refused; the
-    flags mark the scans with much of the seal unseen, noisy depth, or landmarks off the skin. The
-    face's proportions, over 959 synthetic designs with nothing misstated: size 0.83-1.16, depth
-    ratio 0.86-1.12; the shared real scans 0.96-0.98 and 0.97-0.99. Real faces differ more in depth:
-    1 000 ICT Face Model subjects read size 0.82-1.16 and depth ratio 0.65-1.29 over a capture's view
-    (`bench/ict_proportions.py`), which the depth ratio's refusal bounds lie outside.
-    """
-
-    near_mm: float = 2.0
-    coverage_flag: float = 0.75
-    coverage_refuse: float = 0.4
-    hole_flag_mm: float = 30.0
-    hole_refuse_mm: float = 100.0
-    residual_flag_mm: float = 0.5
-    residual_refuse_mm: float = 1.5
-    landmarks_flag_mm: float = 1.0
-    landmarks_refuse_mm: float = 5.0
-    landmark_spread_flag_mm: float = NonrigidParams().user_trust_mm
-    landmark_spread_refuse_mm: float = 10.0
-    detected_spread_flag_mm: float = 7.0
-    detected_spread_refuse_mm: float = 10.0
-    cross_check_spread_mm: float = 5.0
-    shape_apart_flag_mm: float = 1.5
-    shape_apart_refuse_mm: float = np.inf
-    shape_apart_drop_mm: float = 10.0
-    rim_gap_flag_mm: float = 1.0
-    rim_gap_refuse_mm: float = 3.0
-    small_face_flag: float = 0.8
-    small_face_refuse: float = 0.7
-    large_face_flag: float = 1.25
-    large_face_refuse: float = 1.5
-    flat_face_flag: float = 0.75
-    flat_face_refuse: float = 0.62
-    deep_face_flag: float = 1.18
-    deep_face_refuse: float = 1.35
-    in_front_flag_mm2: float = 30.0
-    in_front_refuse_mm2: float = 150.0
-    lips_apart_flag_mm: float = 7.0
-    lips_apart_refuse_mm: float = 11.0
+from ..scan import Scan
+from ..template import load_template
+from ..thresholds import IN_FRONT_MM, QualityParams
 
 
 @dataclass(frozen=True)
