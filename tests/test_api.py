@@ -48,3 +48,20 @@ def test_io_imports_none_of_the_design_stages():
             "[importlib.import_module(f'cpapfit.io.{m.name}') for m in pkgutil.iter_modules(io.__path__)]\n"
             f"print(sorted(m for m in sys.modules if any(m == 'cpapfit.' + s or m.startswith('cpapfit.' + s + '.') for s in {stages!r})))")
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
+
+
+def test_the_registration_parameters_in_params_reach_the_registration(phantom1_dir, monkeypatch):
+    import cpapfit
+    from cpapfit import pipeline
+
+    class Registering(Exception):
+        pass
+
+    def register(*args):
+        raise Registering(args[4])  # register(template, faces, scan, landmarks, params, ...)
+
+    monkeypatch.setattr(pipeline, "register", register)
+    mine = cpapfit.NonrigidParams(user_trust_mm=1.0)
+    with pytest.raises(Registering) as raised:
+        cpapfit.design(cpapfit.load_scan(phantom1_dir), params=cpapfit.Params(registration=mine), report=False)
+    assert raised.value.args[0] is mine
