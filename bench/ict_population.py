@@ -37,7 +37,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from cpapfit import __version__
-from cpapfit.contact import template_curve
+from cpapfit.cushion.contact import template_curve
 from cpapfit.errors import CpapfitError
 from cpapfit.ict import MULTIPIE_TO_FACEMESH, load_ict
 from cpapfit.ict.phantom import ict_head_mesh, make_ict_phantom, random_subject

@@ -12,12 +12,12 @@ from .align.check import FaceCheck
 from .align.initial import initial_alignment, landmark_free_alignment
 from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
-from .contact import Contact, transfer_contact
+from .cushion.contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet
 from .cushion.generic import NOSE_TIP, place, template_cushion
-from .compensation import Preload, compensated_cushion
-from .envelope import enveloped_cushion
+from .cushion.compensation import Preload, compensated_cushion
+from .cushion.envelope import enveloped_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import StateFit, fit_states, sleep_states

@@ -119,7 +119,7 @@ def design_record(d: Design, scan: Scan) -> dict:
         "states_about": "the face asleep (`cpapfit.evaluation.states`): lying on the back with the jaw dropped (the ICT model's "
                         "jawOpen carried onto this face), the mask pushed across its axis or rolled by a pillow, the CPAP "
                         "range's ends; each cushion at its awake headgear force; the custom cushion's membrane is sized so that "
-                        "it seals in each (`cpapfit.envelope`); stock: the best stock size as a clinic fits it (stock_fitting)",
+                        "it seals in each (`cpapfit.cushion.envelope`); stock: the best stock size as a clinic fits it (stock_fitting)",
         "parameters": dict(vars(d.cushion.params)),
     }
 

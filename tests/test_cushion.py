@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from records import written
-from cpapfit.contact import onto_scan, template_curve
+from cpapfit.cushion.contact import onto_scan, template_curve
 from cpapfit.cushion.nurbs import AROUND, ROWS
 from cpapfit.export import threemf_bytes
 from cpapfit.io import load_scan
@@ -254,7 +254,7 @@ def test_the_seal_has_no_step_where_the_scan_data_ends():
     """A seal loop (a circle of radius 40 mm, 128 points) whose scan lies 1.5 mm off it on 3/4 of the
     loop: in the gap the offset fades from the edges, so the seal is continuous there, and deep in
     a long gap it is the template's; a short hole is bridged by a ramp between its edges' offsets."""
-    from cpapfit.contact import FADE_MM, faded_offsets
+    from cpapfit.cushion.contact import FADE_MM, faded_offsets
 
     angle = np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
     loop = 40.0 * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(128)])
@@ -277,7 +277,7 @@ def test_a_seal_on_the_side_of_a_deep_nose_gives_a_cushion_that_does_not_fold(re
     sideways, away from the seal's centre (80-100 degrees off the mask axis, as on the side of a
     deep nose): the flange still goes outwards along the skin, and the cushion is a clean solid
     of the set wall (1.5 x `reach` samples of the seal turn)."""
-    from cpapfit.contact import Contact
+    from cpapfit.cushion.contact import Contact
     from cpapfit.cushion.nurbs import CushionParams, design_cushion
     from cpapfit.cushion.solid import cushion_solid
     from cpapfit.export import WALL_TOLERANCE

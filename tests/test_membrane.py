@@ -63,7 +63,7 @@ def test_flaps_pointing_at_a_circles_centre_close_by_one_over_its_radius_whichev
     """A 20 mm circle on a plane, run either way round: the flaps point at its centre (fanned or
     not) and close on each other by 1/20 per mm of width."""
     from cpapfit.cushion.nurbs import flap_directions, inwards
-    from cpapfit.envelope import converging
+    from cpapfit.cushion.envelope import converging
 
     angle = turn * np.linspace(0.0, 2 * np.pi, 32, endpoint=False)
     circle = 20.0 * np.column_stack([np.cos(angle), np.sin(angle), np.zeros(32)])
@@ -78,8 +78,8 @@ def test_flaps_fan_out_across_a_tight_bend():
     5.4 mm apart square to it close on each other at the corners at least 1/8 per mm of width;
     fanned, at most 0.6 times as fast, so a flap there may be 1.7 times as wide."""
     from cpapfit.cushion.nurbs import flap_directions, inwards
-    from cpapfit.contact import closed_resample
-    from cpapfit.envelope import converging
+    from cpapfit.cushion.contact import closed_resample
+    from cpapfit.cushion.envelope import converging
 
     corner = np.linspace(0.0, np.pi / 2, 16)
     arcs = [np.column_stack([cx + 5 * np.cos(corner + q * np.pi / 2), cy + 5 * np.sin(corner + q * np.pi / 2)])

@@ -7,7 +7,7 @@ import numpy as np
 import trimesh
 
 from ..similarity import Similarity
-from ..contact import Contact, template_curve
+from .contact import Contact, template_curve
 from ..template import load_template
 from .nurbs import Cushion, CushionParams, design_cushion
 

@@ -18,7 +18,7 @@ import trimesh
 from geomdl import NURBS, helpers
 from scipy.ndimage import gaussian_filter1d
 
-from ..contact import Contact, closed_resample
+from .contact import Contact, closed_resample
 from ..frozen import freeze_arrays
 
 AROUND, ROWS, DEGREE = 32, 8, 3

@@ -5,7 +5,7 @@ import trimesh
 from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
-from ..contact import closed_resample
+from .contact import closed_resample
 from ..export import self_intersecting_edges, to_manifold, to_trimesh
 from .nurbs import Cushion
 

@@ -55,7 +55,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..align.nonrigid import Registration
-from ..contact import Contact
+from ..cushion.contact import Contact
 from ..errors import QualityError
 from ..evaluation.gap import SPACINGS, RimGap, data_reach, off_skin
 from ..evaluation.rim import spacing

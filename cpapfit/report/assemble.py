@@ -11,7 +11,7 @@ from matplotlib import colormaps
 
 from .. import __version__
 from ..align.nonrigid import Registration
-from ..contact import Contact
+from ..cushion.contact import Contact
 from ..evaluation.fit import CushionFit
 from ..pipeline import Alignment, Design
 from ..render import scene_of

@@ -31,8 +31,8 @@ import trimesh
 from scipy.ndimage import gaussian_filter1d, median_filter
 from scipy.spatial import cKDTree
 
-from .frozen import freeze_arrays
-from .template import Template, load_template
+from ..frozen import freeze_arrays
+from ..template import Template, load_template
 
 SAMPLES = 128  # points around the seal
 SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples

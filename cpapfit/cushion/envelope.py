@@ -20,14 +20,14 @@ from scipy.ndimage import maximum_filter1d
 from scipy.spatial import cKDTree
 
 from .contact import Contact, closed_resample
-from .cushion.generic import NOSE_TIP
-from .cushion.nurbs import AROUND, Cushion, design_cushion, flap_directions
-from .cushion.solid import with_membrane
-from .evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
-from .evaluation.membrane import width_for
-from .evaluation.rim import SECTORS
-from .export import self_intersecting_edges
-from .evaluation.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
+from .generic import NOSE_TIP
+from .nurbs import AROUND, Cushion, design_cushion, flap_directions
+from .solid import with_membrane
+from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
+from ..evaluation.membrane import width_for
+from ..evaluation.rim import SECTORS
+from ..export import self_intersecting_edges
+from ..evaluation.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
 
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
 REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's slack); the widest is a stock full-face flap's
