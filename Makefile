@@ -20,9 +20,10 @@ $(STAMP): pyproject.toml requirements.lock
 demo: $(STAMP)
 	$(VENV)/bin/cpapfit demo
 
-# Two worker processes (pytest-xdist): most tests use one core, and CI has two; the 15 slowest tests listed.
+# Two worker processes (pytest-xdist): most tests use one core, and CI has two; tests sharing a costly
+# fixture run in one of them (`tests/conftest.py`, SHARED_WORK); the 15 slowest tests listed.
 test: $(STAMP) $(CHROMIUM)
-	$(PY) -m pytest -q -n 2 --durations=15
+	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
 
 # The report test opens report.html in headless Chromium: Debian's package, no browser download.
 $(CHROMIUM):

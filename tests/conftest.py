@@ -4,6 +4,8 @@ from pathlib import Path
 
 import pytest
 
+from records import DATE_EPOCH
+from cpapfit.api import Params, design as api_design
 from cpapfit.cli import main
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
@@ -13,6 +15,18 @@ from cpapfit.pipeline import design, place_template
 from cpapfit.synthetic import make_phantom
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+# Fixtures that take seconds or more to make. The tests sharing one are sent to one worker process
+# (pytest-xdist's loadgroup), so that it is made once, not once in each worker.
+SHARED_WORK = ("placed_subjects", "designed", "nasal1", "report", "twice", "phantoms", "case", "closed_and_open", "rotated_stl",
+               "ict1", "frontal_mesh", "ict_capture", "bare_and_worn")
+
+
+def pytest_collection_modifyitems(items):
+    """Each test using one of SHARED_WORK goes in that fixture's xdist group (the first it uses)."""
+    for item in items:
+        shared = [name for name in SHARED_WORK if name in item.fixturenames]
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(shared[0]))
 
 
 @pytest.fixture(scope="session")
@@ -27,6 +41,15 @@ def phantom1_dir(tmp_path_factory, phantom1):
     folder = tmp_path_factory.mktemp("phantom1")
     write_phantom(phantom1, folder)
     return folder
+
+
+@pytest.fixture(scope="session")
+def nasal1(phantom1_dir):
+    """Seed 1's nasal design through the Python API, beside the stock size the gauge picks, report
+    included (its run date fixed by SOURCE_DATE_EPOCH = DATE_EPOCH): a `DesignResult`."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SOURCE_DATE_EPOCH", DATE_EPOCH)
+        return api_design(load_scan(phantom1_dir), "nasal", params=Params(stock="gauge"))
 
 
 @pytest.fixture(scope="session")

@@ -1,4 +1,4 @@
-"""A JSON file cpapfit wrote, read and validated against the schema the package ships for it."""
+"""A JSON file cpapfit wrote, read and validated against the schema the package ships for it; the run date of the tests' designs."""
 
 import json
 from pathlib import Path
@@ -7,6 +7,7 @@ import jsonschema
 
 from cpapfit.schemas import schema
 
+DATE_EPOCH = "1700000000"  # SOURCE_DATE_EPOCH of the tests' designs: the run date (to the minute) their reports state
 BY_FILE = {"fit.json": "fit", "manifest.json": "manifest", "contact_curve.json": "contact_curve"}
 
 

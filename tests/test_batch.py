@@ -1,7 +1,9 @@
 """cpapfit batch: scans designed on a Dask cluster of worker processes, a failed scan is a row,
 a rerun skips what is unchanged and retries failures, a killed run leaves nothing half-written."""
 
+import contextlib
 import csv
+import io
 import json
 import os
 import shutil
@@ -16,6 +18,7 @@ from distributed import LocalCluster
 
 from records import written
 from cpapfit.batch import find_scans
+from cpapfit.cli import main
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.summary import summary_csv, summary_html
 from cpapfit.jobs import ScanTask, content_hash, run_scan
@@ -48,21 +51,26 @@ def stamps(out, names):
     return {n: ((st := os.stat(out / n / "manifest.json")).st_ino, st.st_mtime_ns) for n in names}
 
 
-def finished(out):
-    """The scans whose outputs are in place (a visible folder with a manifest)."""
-    return [p.parent.name for p in out.glob("*/manifest.json") if not p.parent.name.startswith(".")]
-
-
 def hidden(out):
     return sorted(p.name for p in out.iterdir() if p.name.startswith("."))
 
 
-def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_scheduler(cli, phantoms, tmp_path):
-    inp, out = scans_folder(phantoms, tmp_path / "in"), tmp_path / "out"
+@pytest.fixture(scope="module")
+def batched(phantoms, tmp_path_factory):
+    """p1, p2, a bad file and a note batched on a local cluster of two workers: (input, output, exit code, stderr)."""
+    folder = tmp_path_factory.mktemp("batched")
+    inp, out = scans_folder(phantoms, folder / "in"), folder / "out"
     (inp / "bad.ply").write_bytes(b"ply\nthis is no mesh\n")
     (inp / "notes.txt").write_text("not a scan")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["batch", str(inp), "--out", str(out), "--workers", "2", "--stock", "none"])
+    return inp, out, code, err.getvalue()
 
-    code, _, err = cli("batch", inp, "--out", out, "--workers", 2, "--stock", "none")
+
+def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_scheduler(cli, batched, tmp_path):
+    batch_inp, batch_out, code, err = batched
+    inp, out = shutil.copytree(batch_inp, tmp_path / "in"), shutil.copytree(batch_out, tmp_path / "out")
     assert code == 1, err  # some failed
     rows = summary(out)
     assert sorted(rows) == ["bad", "p1", "p2"]  # notes.txt is no scan
@@ -92,30 +100,36 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
     assert stamps(out, ["p1", "p2"]) == before  # not redone
 
 
-def test_rerun_after_a_kill_redoes_only_what_was_unfinished(cli, phantoms, tmp_path):
-    inp, out, log = scans_folder(phantoms, tmp_path / "in"), tmp_path / "out", tmp_path / "stderr.txt"
+def test_a_killed_rerun_leaves_the_earlier_design_and_the_next_redoes_only_what_was_unfinished(cli, batched, tmp_path):
+    """A rerun after p2's input changed is killed while it designs p2: p2's folder still holds the
+    earlier design, whole; the run after redoes p2 alone."""
+    batch_inp, batch_out, _, _ = batched
+    inp, out, log = tmp_path / "in", shutil.copytree(batch_out, tmp_path / "out"), tmp_path / "stderr.txt"
+    for name in ("p1", "p2"):
+        shutil.copytree(batch_inp / name, inp / name)
+    with open(inp / "p2" / "intrinsics.json", "a") as fh:
+        fh.write("\n")  # other bytes, the same scan: p2 is designed again
+    earlier = written(out / "p2" / "manifest.json")
     command = [sys.executable, "-m", "cpapfit", "batch", str(inp), "--out", str(out), "--workers", "1", "--stock", "none", "--quiet"]
     with open(log, "w") as stderr:
         proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=stderr)
     try:
         deadline = time.monotonic() + 240
-        while not (finished(out) and hidden(out)):  # one scan done, the next one under way
+        while not hidden(out):  # p2 under way in its staging folder
             assert proc.poll() is None and time.monotonic() < deadline, log.read_text()
             time.sleep(0.05)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the batch and its worker processes
         proc.wait()
-    (done,) = finished(out)
-    (unfinished,) = {"p1", "p2"} - {done}
-    assert not (out / unfinished).exists() and hidden(out)  # only hidden staging is left of it
-    before = stamps(out, [done])
+    assert written(out / "p2" / "manifest.json") == earlier and all((out / "p2" / f).is_file() for f in earlier["files"])
+    before = stamps(out, ["p1"])
 
     code, _, err = cli("batch", inp, "--out", out, "--workers", 1, "--stock", "none")
     assert code == 0, err
     rows = summary(out)
-    assert rows[done]["status"] == "unchanged" and rows[unfinished]["status"] == "designed"
-    assert stamps(out, [done]) == before
-    assert hidden(out) == [] and (out / unfinished / "manifest.json").is_file()
+    assert rows["p1"]["status"] == "unchanged" and rows["p2"]["status"] == "designed"
+    assert stamps(out, ["p1"]) == before
+    assert hidden(out) == [] and written(out / "p2" / "manifest.json")["hash"] == content_hash(ScanTask(inp / "p2", out / "p2", stock=None))
 
 
 def test_content_hash_follows_bytes_parameters_and_an_obj_texture(tmp_path):

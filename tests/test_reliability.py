@@ -12,18 +12,17 @@ import subprocess
 import sys
 import threading
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
-from records import written
-from cpapfit.align.initial import DISAGREE_MM
+from records import DATE_EPOCH, written
 from cpapfit.cli import main
 from cpapfit.io import load_scan
 from cpapfit.outputs import design_files, report_files
 from cpapfit.jobs import worker
-from cpapfit.pipeline import design
 from cpapfit.work import at_once
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
@@ -33,7 +32,7 @@ from cpapfit.errors import QualityError
 from cpapfit.quality.proportions import proportions
 from cpapfit.loops import longest_run
 from cpapfit.quality.gates import assess, require_quality
-from cpapfit.thresholds import QualityParams
+from cpapfit.thresholds import DISAGREE_MM, QualityParams
 from cpapfit.template import load_template
 
 GATES = QualityParams()
@@ -62,21 +61,29 @@ def no_network(attempts: list):
 
 
 @pytest.fixture(scope="module")
-def twice(phantom1_dir, tmp_path_factory):
-    """Seed 1 designed twice: normally, then with the network blocked. {"plain"|"offline": (code, stderr, folder)}, attempts."""
-    runs, attempts = {}, []
+def twice(nasal1, tmp_path_factory):
+    """Seed 1's nasal design twice: through the Python API (`nasal1`), saved, then by the command line
+    with the network blocked. {"plain"|"offline": (code, stderr, folder)}, attempts."""
+    attempts, offline = [], tmp_path_factory.mktemp("offline")
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("SOURCE_DATE_EPOCH", "1700000000")  # the run date, to the minute, is on the report
-        for name in ("plain", "offline"):
-            out = tmp_path_factory.mktemp(name)
-            with no_network(attempts) if name == "offline" else contextlib.nullcontext():
-                runs[name] = (*run_design(phantom1_dir, "--stock", "gauge", "--out", out), out)  # one stock size: quicker
-    return runs, attempts
+        mp.setenv("SOURCE_DATE_EPOCH", DATE_EPOCH)  # the run date, to the minute, is on the report
+        with no_network(attempts):
+            code, err = run_design(nasal1.scan.source, "--stock", "gauge", "--out", offline)
+    return {"plain": (0, "", nasal1.save(tmp_path_factory.mktemp("plain") / "design")), "offline": (code, err, offline)}, attempts
+
+
+def design_bytes(folder: Path) -> dict:
+    """{file name: bytes} of a design folder; manifest.json as its record less the units asked for
+    (the command line records what --units said, "auto"; a Python design the units its scan was read in)."""
+    files = {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+    manifest = json.loads(files.pop("manifest.json"))
+    manifest["parameters"].pop("units")
+    return files | {"manifest.json": manifest}
 
 
 def test_the_same_input_gives_the_same_bytes(twice):
     runs, _ = twice
-    files = {name: {p.name: p.read_bytes() for p in sorted(out.iterdir())} for name, (_, _, out) in runs.items()}
+    files = {name: design_bytes(out) for name, (_, _, out) in runs.items()}
     assert len(files["plain"]) >= 8 and files["plain"].keys() == files["offline"].keys()
     for name, data in files["plain"].items():
         assert data == files["offline"][name], name
@@ -91,7 +98,7 @@ def test_a_design_needs_no_network(twice):
 
 
 def test_a_clean_subject_trips_no_gate(twice):
-    code, err, out = twice[0]["plain"]
+    code, err, out = twice[0]["offline"]
     fit = written(out / "fit.json")
     assert code == 0 and fit["rescan_advised"] is False and fit["warnings"] == []
     q = fit["quality"]
@@ -255,12 +262,11 @@ def test_longest_hole_wraps_around_the_seal():
     assert count(np.ones(4, bool)) == 4 and count(np.zeros(4, bool)) == 0
 
 
-def test_pictures_drawn_in_a_worker_process_are_the_same_bytes(phantom1_dir, monkeypatch):
+def test_pictures_drawn_in_a_worker_process_are_the_same_bytes(nasal1, monkeypatch):
     """The report drawn with its design pictures in a second process (as `cpapfit design` does) is
     the report drawn in one (a spawned worker: this test process already runs other threads)."""
-    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # the run date, to the minute, is on the page
-    scan = load_scan(phantom1_dir)
-    d = design(scan, "nasal", stock="gauge")
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", DATE_EPOCH)  # the run date, to the minute, is on the page
+    d, scan = nasal1.design, nasal1.scan
     files = design_files(d, scan)
     alone = report_files(d, scan, files)
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -283,11 +289,11 @@ def test_the_command_with_its_worker_process_gives_the_same_bytes(twice, phantom
     """`cpapfit design` as its own process (a fresh, single-threaded one: the stock sizes and the design's
     pictures are made in a forked worker, here even if the machine is busy) writes what the
     in-process runs wrote."""
-    env = {**os.environ, "SOURCE_DATE_EPOCH": "1700000000"}
+    env = {**os.environ, "SOURCE_DATE_EPOCH": DATE_EPOCH}
     argv = ["design", str(phantom1_dir), "--stock", "gauge", "--out", str(tmp_path), "--quiet"]
     script = f"import sys, cpapfit.jobs as j; j._idle_core = lambda: True; from cpapfit.cli import main; sys.exit(main({argv!r}))"
     subprocess.run([sys.executable, "-c", script], check=True, env=env, capture_output=True)
-    _, _, out = twice[0]["plain"]
+    _, _, out = twice[0]["offline"]
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in out.iterdir())
     for p in out.iterdir():
         assert (tmp_path / p.name).read_bytes() == p.read_bytes(), p.name

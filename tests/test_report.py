@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from cpapfit.io import load_scan
 from cpapfit.outputs import design_files, input_sha256, run_date
-from cpapfit.pipeline import design
 from cpapfit.report.advice import Notice, gate_notices, landmark_notices, scan_notices
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files
 from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
@@ -25,9 +23,9 @@ PROVENANCE = Provenance("phantom1", "0" * 64, "2024-01-01 00:00 UTC")
 
 
 @pytest.fixture(scope="session")
-def designed1(phantom1_dir):
-    scan = load_scan(phantom1_dir)
-    return scan, design(scan, "nasal")
+def designed1(nasal1):
+    """(scan, Design) of seed 1's nasal design."""
+    return nasal1.scan, nasal1.design
 
 
 @pytest.fixture(scope="session")
