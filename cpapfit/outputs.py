@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from .align.nonrigid import Registration
-from .export import stl_bytes, threemf_bytes
+from .export import assembly_3mf_bytes, stl_bytes, threemf_bytes
 from .io.write import json_bytes, ply_bytes
 from .pipeline import Design
-from .records import contact_curve_record, design_record
+from .records import contact_curve_record, design_record, mask_record
 from .report.assemble import Provenance, report_files as assemble_report
 from .scan import Scan
 from .template import load_template
@@ -36,6 +36,9 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "cushion.stl": stl_bytes(d.solid),
         "cushion.3mf": threemf_bytes(d.solid, "cushion"),
         **{f"{name}.stl": stl_bytes(part) for name, part in d.mould_parts.items()},
+        "frame.stl": stl_bytes(d.frame.mesh),
+        "assembly.3mf": assembly_3mf_bytes({"cushion": d.solid, "frame": d.frame.mesh}),
+        "mask.json": json_bytes(mask_record(d)),
         "fit.json": json_bytes(design_record(d, scan)),
     }
 

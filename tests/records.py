@@ -7,7 +7,7 @@ import jsonschema
 
 from cpapfit.schemas import schema
 
-BY_FILE = {"fit.json": "fit", "manifest.json": "manifest", "contact_curve.json": "contact_curve"}
+BY_FILE = {"fit.json": "fit", "manifest.json": "manifest", "contact_curve.json": "contact_curve", "mask.json": "mask"}
 
 
 def written(path: Path, name: str | None = None) -> dict:
