@@ -1,8 +1,10 @@
 """The mask's dead space: the air between the face and the connector's bore, which the patient
-breathes back before fresh air (ml).
+breathes back before fresh air (ml), held within LIMIT_ML by lowering the frame ring towards the
+face where the face is large (`ring_clearance`).
 
 The air is the inside of the cushion's sheet (its face-side opening carried back into the head
-along the mask axis) with the frame's `airspace`, less whatever lies behind the skin: measured in
+along the mask axis) with the frame's `airspace`, less the frame's solid (the spigot inside the
+cushion's end) and whatever lies behind the skin: measured in
 columns along the mask axis (COLUMN_MM apart across it), each column's length inside the air and in
 front of the skin's first crossing. The skin is the registered template (on the scan within its
 residual, and whole where the scan has holes); the membrane and the flange's contact band are taken
@@ -12,21 +14,39 @@ as thin.
 import numpy as np
 import trimesh
 
-from .cushion.nurbs import Cushion
+from .cushion.nurbs import FRAME_RING_MM, Cushion
 from .export import to_manifold, to_trimesh
 from .frame import Frame
 from .mould import plug
 
 COLUMN_MM = 1.0
 BEHIND_MM = 40.0  # the seal's opening carried this far back into the head: behind any skin inside it
+LIMIT_ML = {"nasal": 120.0, "oronasal": 300.0}
+CUSHION_SHARE = 5.0 / 6.0  # of the limit, the most the cushion's inside may take before the ring comes down: the frame's air is the rest
+LEAST_CLEARANCE_MM = 5.0  # the ring at least this far over the nose tip: the tip below the frame's lowest face (its groove, 4 mm)
 
 
-def dead_space_ml(cushion: Cushion, frame: Frame, skin: trimesh.Trimesh, n_u: int = 128, n_v: int = 24) -> float:
-    """The air (ml) enclosed by the cushion (sampled n_u x n_v), the frame and the `skin` (mm, scan frame)."""
+def dead_space_ml(cushion: Cushion, frame: Frame, skin: trimesh.Trimesh) -> float:
+    """The air (ml) enclosed by the cushion, the frame and the `skin` (mm, scan frame)."""
+    air = to_manifold(_inside(cushion)) + to_manifold(frame.airspace) - to_manifold(frame.mesh)
+    return volume_in_front(to_trimesh(air), skin, cushion.axis) / 1000.0
+
+
+def ring_clearance(cushion: Cushion, skin: trimesh.Trimesh) -> float:
+    """The frame ring's clearance over the nose tip (mm) for a face (`skin`, mm, scan frame) on which
+    `cushion` is designed with its own (`params.frame_clearance_mm`): that, lowered where the air inside
+    the cushion takes more than CUSHION_SHARE of the dead-space limit, by the excess over the ring's
+    area (each mm the ring comes down takes about the ring's area of air), to LEAST_CLEARANCE_MM at least."""
+    a, b = np.array(FRAME_RING_MM[cushion.mask]) / 2
+    excess_mm3 = volume_in_front(_inside(cushion), skin, cushion.axis) - 1000.0 * CUSHION_SHARE * LIMIT_ML[cushion.mask]
+    most = cushion.params.frame_clearance_mm
+    return float(np.clip(most - excess_mm3 / (np.pi * a * b), min(LEAST_CLEARANCE_MM, most), most))
+
+
+def _inside(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Trimesh:
+    """The solid inside the cushion's sheet (sampled n_u x n_v), its face opening carried BEHIND_MM back into the head."""
     grid = cushion.grid(n_u, n_v)
-    carried = np.concatenate([grid[:, :1] - BEHIND_MM * cushion.axis, grid], axis=1)
-    air = to_trimesh(to_manifold(plug(carried)) + to_manifold(frame.airspace))
-    return volume_in_front(air, skin, cushion.axis) / 1000.0
+    return plug(np.concatenate([grid[:, :1] - BEHIND_MM * cushion.axis, grid], axis=1))
 
 
 def volume_in_front(solid: trimesh.Trimesh, skin: trimesh.Trimesh, axis: np.ndarray, spacing: float = COLUMN_MM) -> float:

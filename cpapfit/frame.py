@@ -5,9 +5,11 @@ oronasal masks the anti-asphyxia valve opening with its flap seat, and four head
 Built in the mask's frame (x across the face, y up, z along the mask axis out of the face, origin
 the centre of the cushion's frame ring, mm) and returned in the scan's. The collar around the ring
 is the frame's solid less the cushion itself: its groove is the cushion's last GROOVE_MM, so the
-two touch without interference and the cushion's end is held on both faces (the mould casts that
-end with the rest of the cushion). Over the collar a dome of wall WALL_MM rises to the connector's
-shoulder; the port's axis is the mask axis, pointing away from the face.
+two touch without interference, and the collar reaches COLLAR_RIM_MM beyond the cushion's end on
+the outside and SPIGOT_MM beyond it on the inside (a spigot all round, wherever the end leans), so
+that the end is held on both faces (the mould casts that end with the rest of the cushion). Over
+the collar a dome of wall WALL_MM rises to the connector's shoulder; the port's axis is the mask
+axis, pointing away from the face.
 """
 
 from dataclasses import dataclass
@@ -28,12 +30,14 @@ SHOULDER_MM = (28.0, 2.0)  # diameter, length: the stop the hose's socket meets
 WALL_MM = 2.0  # the dome's wall
 GROOVE_MM = 4.0  # how far the cushion's end enters the frame
 COLLAR_TOP_MM, COLLAR_RIM_MM, SPIGOT_MM = 2.5, 2.0, 2.0  # frame above, outside and inside the cushion's end
+END_MM = GROOVE_MM + 1.0  # the cushion's end the frame meets: its last END_MM (the frame lies above -GROOVE_MM)
 DOME_MM = 8.0  # the dome's rise from the collar to the shoulder
-SEGMENTS = 256  # around the cone: a slice's polygon lies within 1e-3 mm of its circle
+SEGMENTS = 128  # around the cone: a slice's polygon lies within 4e-3 mm of its circle
 VENT_ROWS = (0.45, 0.65, 0.85)  # where the vent rows lie from the collar (0) to the shoulder (1)
 VENT_ARC_DEG = 35.0  # vents within this angle of the head's up direction around the axis: away from a bed partner
 VENT_PITCH = 3.0  # centre spacing in hole diameters
 VALVE_MM = (12.0, 18.0, 1.5)  # anti-asphyxia valve: opening and seat diameters, seat height inside the shell
+VALVE_AT, SEAT_CLEAR_MM = (0.5, 0.55, 0.6, 0.65, 0.7), 0.5  # where the valve may lie up the dome; its seat's clearance over the collar
 TAB_MM = (13.0, 22.0, 3.0)  # headgear tab: reach beyond the collar, width, thickness
 SLOT_MM = (4.0, 17.0, 5.0)  # strap slot: width, length, distance from the collar
 ANCHOR_DEG = (35.0, 145.0, 215.0, 325.0)  # the tabs' angles from the patient's left towards up
@@ -82,56 +86,62 @@ def mask_frame(cushion: Cushion) -> np.ndarray:
 def build_frame(cushion: Cushion, solid: trimesh.Trimesh) -> Frame:
     """The frame of a cushion whose printable solid is `solid` (mm, scan frame)."""
     to_scan = mask_frame(cushion)
-    cast = to_manifold(solid)
-    a, b = np.array(FRAME_RING_MM[cushion.mask]) / 2
-    outer = np.array([a, b]) + _reach(cast.transform(np.linalg.inv(to_scan)[:3]), a, b) + COLLAR_RIM_MM
+    end = _end(to_manifold(solid).transform(np.linalg.inv(to_scan)[:3]))
+    ring = np.array(FRAME_RING_MM[cushion.mask]) / 2
+    inside, outside = _reach(end, *ring)
+    outer = ring + outside + COLLAR_RIM_MM
     top = COLLAR_TOP_MM + DOME_MM
     vents = sized_vents()
     holes = _vent_holes(outer, vents)
     valve = _valve(outer) if cushion.mask == "oronasal" else None
     drilled = [_drill(p, d, vents.diameter_mm) for p, d in holes] + ([_drill(*valve, VALVE_MM[0])] if valve is not None else [])
     anchors = [_anchor(outer, angle) for angle in ANCHOR_DEG]
-    body = _outer(outer, top) + m3.Manifold.batch_boolean([tab for tab, _ in anchors], m3.OpType.Add)
-    air = _inner((a, b), outer, top)
+    body = m3.Manifold.batch_boolean([_outer(outer, top)] + [tab for tab, _ in anchors], m3.OpType.Add)
+    air = _inner(ring - inside - SPIGOT_MM, outer, top)
     bore = m3.Manifold.cylinder(top + SHOULDER_MM[1] + CONE_MM + 2, BORE_MM / 2, BORE_MM / 2, SEGMENTS).translate([0, 0, top - WALL_MM - 1])
-    shell = body - air - bore + (_seat(*valve) if valve is not None else m3.Manifold())
-    cut = m3.Manifold.batch_boolean(drilled + [slot for _, slot in anchors], m3.OpType.Add)
-    place = to_scan[:3]  # the cushion is cut from the frame where it lies, in the scan's frame: the groove is its own faces
-    frame = _largest((shell - cut).transform(place) - cast)
+    seat = _seat(*valve) if valve is not None else m3.Manifold()
+    shell = body - (air + bore) + seat - m3.Manifold.batch_boolean(drilled + [slot for _, slot in anchors], m3.OpType.Add)
+    place = to_scan[:3]  # the cushion's end is cut from the frame where it lies: the groove is its own faces
     rotation, at = to_scan[:3, :3], to_scan[:3, 3]
     scan = lambda p: np.asarray(p) @ rotation.T + at  # noqa: E731
     return Frame(
-        to_trimesh(frame), to_trimesh(air.transform(place) - cast),
+        to_trimesh((shell - end).transform(place)), to_trimesh((air - end).transform(place)),
         scan([0.0, 0.0, top + SHOULDER_MM[1] + CONE_MM]), rotation[:, 2],
         vents, np.stack([np.stack([scan(p), rotation @ d]) for p, d in holes]),
         None if valve is None else np.stack([scan(valve[0]), rotation @ valve[1]]),
         np.stack([scan(_slot_centre(outer, angle)) for angle in ANCHOR_DEG]),
-        len(drilled) + len(anchors), assembly_checks(frame, cast, len(drilled) + len(anchors)),
+        len(drilled) + len(anchors), assembly_checks(shell, end, len(drilled) + len(anchors)),
     )
 
 
-def assembly_checks(frame: m3.Manifold, cast: m3.Manifold, holes: int) -> dict:
-    """The cushion (`cast`) in the frame, in double precision: the volume they share (interference, mm3),
-    and whether the airway is closed: the two joined are one solid whose genus is 1 (the tube from the
-    face to the port) plus the frame's through-holes, so that no other opening runs between them."""
-    joined = max((frame + cast).decompose(), key=lambda piece: piece.volume())
-    return {"groove_mm": GROOVE_MM, "interference_mm3": round(max(0.0, (frame ^ cast).volume()), 4), "through_holes": holes,
-            "joined_genus": joined.genus(), "airway_closed": joined.genus() == 1 + holes}
+def assembly_checks(shell: m3.Manifold, end: m3.Manifold, holes: int) -> dict:
+    """The cushion's `end` (`_end`) in the frame, which is the `shell` less the end (double precision):
+    the frame is one piece; the volume it shares with the cushion (interference, mm3); and whether the
+    airway is closed: the two joined are one solid whose genus is 1 (the tube from the face to the
+    port) plus the frame's through-holes, so that no other opening runs between them. The joined
+    solid is the shell and the end joined, the same set without the faces the groove shares with the
+    end (whose round-off leaves slivers of no volume that would count as handles); the end's join to
+    the rest of the cushion, a whole cross-section, adds no handle."""
+    frame, joined = shell - end, shell + end
+    genus, pieces = joined.genus(), len(frame.decompose()) + len(joined.decompose()) - 1
+    return {"groove_mm": GROOVE_MM, "interference_mm3": round(max(0.0, (frame ^ end).volume()), 4), "through_holes": holes,
+            "pieces": pieces, "joined_genus": genus, "airway_closed": pieces == 1 and genus == 1 + holes}
 
 
-def _largest(solid: m3.Manifold) -> m3.Manifold:
-    """The largest piece of a solid: where the cushion's end flares outwards, the collar's spigot under
-    the flare is cut off by it, on the air side; those crumbs are left out."""
-    return max(solid.decompose(), key=lambda piece: piece.volume())
+def _end(cast: m3.Manifold) -> m3.Manifold:
+    """The cushion's last END_MM along the mask axis (a solid band; `cast` in the mask's frame): all of it the frame meets."""
+    lo, hi = np.asarray(cast.bounding_box()).reshape(2, 3)
+    size = hi - lo + 2.0
+    return cast ^ m3.Manifold.cube([size[0], size[1], END_MM + 1.0]).translate([lo[0] - 1.0, lo[1] - 1.0, -END_MM])
 
 
-def _reach(cast: m3.Manifold, a: float, b: float) -> float:
-    """How far (mm) the cushion's last GROOVE_MM reach outside its ring (a, b semi-axes) across the axis."""
-    v = np.asarray(cast.to_mesh().vert_properties)[:, :3]
-    v = v[v[:, 2] > -GROOVE_MM - 1.0]
+def _reach(end: m3.Manifold, a: float, b: float) -> tuple[float, float]:
+    """(inside, outside) mm: how far the cushion's `end` reaches inside and outside its ring (a, b
+    semi-axes) across the axis, each at least 0."""
+    v = np.asarray(end.to_mesh().vert_properties)[:, :3]
     angle = np.arctan2(v[:, 1], v[:, 0])
-    ring = a * b / np.hypot(b * np.cos(angle), a * np.sin(angle))
-    return float(max(0.0, (np.hypot(v[:, 0], v[:, 1]) - ring).max()))
+    off = np.hypot(v[:, 0], v[:, 1]) - a * b / np.hypot(b * np.cos(angle), a * np.sin(angle))
+    return float(max(0.0, -off.min())), float(max(0.0, off.max()))
 
 
 def _ellipse(semi: tuple, z: float, n: int = SEGMENTS) -> np.ndarray:
@@ -152,14 +162,14 @@ def _outer(outer: np.ndarray, top: float) -> m3.Manifold:
     return collar + m3.Manifold.cylinder(length + 0.5, shoulder / 2, shoulder / 2, SEGMENTS).translate([0, 0, top - 0.5]) + cone
 
 
-def _inner(ring: tuple, outer: np.ndarray, top: float) -> m3.Manifold:
-    """The air inside the frame up to the bore: the opening through the collar (the ring less SPIGOT_MM)
+def _inner(opening: np.ndarray, outer: np.ndarray, top: float) -> m3.Manifold:
+    """The air inside the frame up to the bore: the opening through the collar (semi-axes `opening`)
     and the dome's inside, its wall WALL_MM thick (each semi-axis's line from collar to shoulder
     offset inwards by WALL_MM)."""
     drop = outer - SHOULDER_MM[0] / 2
     base = outer - WALL_MM * np.hypot(drop, DOME_MM) / DOME_MM
-    opening = _ellipse(np.asarray(ring) - SPIGOT_MM, 0.0)
-    through = _hull(opening - [0, 0, GROOVE_MM + 1.0], opening + [0, 0, COLLAR_TOP_MM + 0.01])
+    rim = _ellipse(opening, 0.0)
+    through = _hull(rim - [0, 0, END_MM], rim + [0, 0, COLLAR_TOP_MM + 0.01])
     return through + _hull(_ellipse(base, COLLAR_TOP_MM), _ellipse(base - drop * (DOME_MM - WALL_MM) / DOME_MM, top - WALL_MM))
 
 
@@ -191,8 +201,14 @@ def _vent_holes(outer: np.ndarray, vents: Vents) -> list[tuple[np.ndarray, np.nd
 
 
 def _valve(outer: np.ndarray) -> np.ndarray:
-    """(2, 3): the anti-asphyxia valve's outer centre and direction, halfway up the dome's lower side."""
-    return np.stack(_dome_point(outer, -90.0, 0.5))
+    """(2, 3): the anti-asphyxia valve's outer centre and direction on the dome's lower side, the lowest
+    of VALVE_AT (from the collar, 0, to the shoulder, 1) whose seat stands SEAT_CLEAR_MM above the
+    collar's top (a seat touching the collar would close a loop of solid round the air)."""
+    for t in VALVE_AT:
+        valve = np.stack(_dome_point(outer, -90.0, t))
+        if _seat(*valve).bounding_box()[2] > COLLAR_TOP_MM + SEAT_CLEAR_MM:
+            break
+    return valve
 
 
 def _drill(point: np.ndarray, direction: np.ndarray, diameter: float) -> m3.Manifold:

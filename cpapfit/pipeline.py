@@ -21,7 +21,7 @@ from .envelope import enveloped_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import StateFit, fit_states, sleep_states
-from .dead_space import dead_space_ml
+from .dead_space import dead_space_ml, ring_clearance
 from .export import SolidError, check_closed, check_solid
 from .frame import Frame, build_frame
 from .mould import mould
@@ -196,6 +196,7 @@ def design(
     gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape, quality))  # or refuse: rescan
     fitting = fitting_stock(mask, face, stock, params, fit_params, submit) if stock else None
     on_stage("solid and checks")
+    params = replace(params, frame_clearance_mm=ring_clearance(neutral, face.registered))  # the dead space within its limit
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)

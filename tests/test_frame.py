@@ -1,8 +1,10 @@
 """The mask's frame: the ISO 5356-1 cone measured on slices of the written STL, the vents against
-their target curve, the cushion in its groove, the airway closed but for the holes; the dead space's
-column integral on solids of known volume."""
+their target curve, the cushion in its groove (also where its end flares out past the ring, as on a
+large face), the airway closed but for the holes; the dead space's column integral on solids of
+known volume, and the frame ring lowered where the cushion would hold too much air."""
 
 import io
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,19 +13,35 @@ from scipy.spatial import cKDTree
 
 from cpapfit.cushion.generic import contact_on, template_cushion
 from cpapfit.cushion.solid import cushion_solid
-from cpapfit.dead_space import volume_in_front
+from cpapfit.cushion.nurbs import FRAME_RING_MM
+from cpapfit.dead_space import CUSHION_SHARE, LIMIT_ML, _inside, ring_clearance, volume_in_front
 from cpapfit.export import check_closed, stl_bytes, to_manifold
-from cpapfit.frame import CONE_MM, build_frame, cone_diameter_mm
+from cpapfit.frame import CONE_MM, build_frame, cone_diameter_mm, mask_frame
 from cpapfit.metrics import sliced_diameters
 from cpapfit.template import load_template
 from cpapfit.vents import TARGET_CMH2O, TARGET_L_MIN
 
 
-@pytest.fixture(scope="module", params=["nasal", "oronasal"])
+FLARE = 1.15  # the face's side of the cushion widened about the axis, its ring kept: the end comes in from outside the ring
+
+
+def flared(mask: str):
+    """The template's cushion with all but its frame ring widened FLARE times about the axis."""
+    cushion = template_cushion(mask)
+    centre = mask_frame(cushion)[:3, 3]
+    rel = np.array(cushion.control[:, :-1]) - centre
+    along = (rel @ cushion.axis)[..., None] * cushion.axis
+    control = np.array(cushion.control)
+    control[:, :-1] = centre + along + FLARE * (rel - along)
+    return replace(cushion, control=control)
+
+
+@pytest.fixture(scope="module", params=[("nasal", False), ("oronasal", False), ("oronasal", True)], ids=["nasal", "oronasal", "flared"])
 def framed(request):
-    """(cushion solid, Frame) of the cushion designed on the template."""
-    cushion = template_cushion(request.param)
-    solid, _, _ = cushion_solid(cushion, contact_on(request.param, load_template().mesh()).normals)
+    """(cushion solid, Frame) of the cushion designed on the template (flared: `flared`)."""
+    mask, flare = request.param
+    cushion = flared(mask) if flare else template_cushion(mask)
+    solid, _, _ = cushion_solid(cushion, contact_on(mask, load_template().mesh()).normals)
     return solid, build_frame(cushion, solid)
 
 
@@ -51,7 +69,7 @@ def test_the_frame_is_closed_with_a_hole_for_each_vent_valve_and_strap_slot(fram
 def test_the_cushion_sits_in_its_groove_and_the_airway_is_closed(framed):
     solid, frame = framed
     fit = frame.assembly
-    assert fit["interference_mm3"] < 0.01 and fit["airway_closed"] and fit["joined_genus"] == 1 + frame.holes
+    assert fit["interference_mm3"] < 0.01 and fit["airway_closed"] and fit["joined_genus"] == 1 + frame.holes and fit["pieces"] == 1
     near, _ = cKDTree(frame.mesh.vertices).query(solid.vertices)
     touching = solid.vertices[near < 1e-3]  # the cushion's corners the groove's faces share: where it holds the cushion
     across = touching - (touching @ frame.port_axis)[:, None] * frame.port_axis
@@ -74,3 +92,15 @@ def test_volume_in_front_of_a_skin_on_solids_of_known_volume():
     assert volume_in_front(sphere, below, axis) == pytest.approx(sphere.volume, rel=0.01)
     cap = np.pi * 5.0**2 * (3 * 10.0 - 5.0) / 3  # the sphere above z = 5
     assert volume_in_front(sphere, skin, axis) == pytest.approx(cap, rel=0.02)
+
+
+def test_the_ring_comes_down_where_the_cushion_holds_too_much_air(monkeypatch):
+    cushion, skin = template_cushion("oronasal"), load_template().mesh()
+    assert ring_clearance(cushion, skin) == cushion.params.frame_clearance_mm  # the template's face: within the limit
+    inside_ml = volume_in_front(_inside(cushion), skin, cushion.axis) / 1000.0
+    monkeypatch.setitem(LIMIT_ML, "oronasal", (inside_ml - 15.0) / CUSHION_SHARE)  # a limit the cushion's inside is 15 ml over
+    lowered = ring_clearance(cushion, skin)
+    a, b = np.array(FRAME_RING_MM["oronasal"]) / 2
+    assert lowered == pytest.approx(cushion.params.frame_clearance_mm - 15000.0 / (np.pi * a * b), abs=1e-6)
+    again = template_cushion("oronasal", replace(cushion.params, frame_clearance_mm=lowered))
+    assert volume_in_front(_inside(again), skin, cushion.axis) / 1000.0 == pytest.approx(inside_ml - 15.0, abs=3.0)
