@@ -4,11 +4,12 @@ face where the face is large (`ring_clearance`).
 
 The air is the inside of the cushion's sheet (its face-side opening carried back into the head
 along the mask axis) with the frame's `airspace`, less the frame's solid (the spigot inside the
-cushion's end) and whatever lies behind the skin: measured in
-columns along the mask axis (COLUMN_MM apart across it), each column's length inside the air and in
-front of the skin's first crossing. The skin is the registered template (on the scan within its
-residual, and whole where the scan has holes); the membrane and the flange's contact band are taken
-as thin.
+cushion's end) and whatever lies behind the skin: the air's intersection with the space in front
+of the skin, whose underside is the skin's first crossing on columns along the mask axis COLUMN_MM
+apart (a height field; casting the columns through the air itself instead, its close faces made
+the count jump by 10 ml between designs 0.01 mm apart). The skin is the registered template (on
+the scan within its residual, and whole where the scan has holes); the membrane and the flange's
+contact band are taken as thin.
 """
 
 import numpy as np
@@ -51,20 +52,37 @@ def _inside(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Trimesh:
 
 def volume_in_front(solid: trimesh.Trimesh, skin: trimesh.Trimesh, axis: np.ndarray, spacing: float = COLUMN_MM) -> float:
     """The volume (mm3) of a closed `solid` in front of the `skin` along the unit `axis` (out of the face):
-    columns along -axis on a square grid `spacing` mm apart (offset from the grid's lines by an irrational
-    share, so that no column runs along an edge), each the sum over its crossings of the solid of
-    min(t, skin) signed by entering or leaving, t the distance along the column."""
+    the solid's intersection (manifold3d) with the space in front of the skin (`_in_front`, on columns
+    `spacing` mm apart)."""
+    return float((to_manifold(solid) ^ to_manifold(_in_front(solid.vertices, skin, axis, spacing))).volume())
+
+
+def _in_front(points: np.ndarray, skin: trimesh.Trimesh, axis: np.ndarray, spacing: float) -> trimesh.Trimesh:
+    """The closed solid over (N, 3) `points` across the unit `axis` whose underside is the skin: columns
+    along -axis on a square grid `spacing` mm apart, each from above the points down to the skin's first
+    crossing (or below the points where it misses the skin), joined as a height field."""
     across = np.linalg.svd(np.eye(3) - np.outer(axis, axis))[0][:, :2]
-    flat = solid.vertices @ across
-    lo, hi = flat.min(axis=0), flat.max(axis=0)
-    u, v = (np.arange(lo[k] + spacing * (0.5 + 0.1 * np.sqrt(2 + k)), hi[k], spacing) for k in (0, 1))
+    flat, along = points @ across, points @ axis
+    u, v = (np.arange(flat[:, k].min() - spacing, flat[:, k].max() + 2.0 * spacing, spacing) for k in (0, 1))
     uu, vv = (g.ravel() for g in np.meshgrid(u, v, indexing="ij"))
-    start = np.outer(uu, across[:, 0]) + np.outer(vv, across[:, 1]) + ((solid.vertices @ axis).max() + 1.0) * axis
-    down = np.tile(-axis, (len(start), 1))
-    stop = np.full(len(start), np.inf)
-    loc, ray, _ = skin.ray.intersects_location(start, down, multiple_hits=False)
-    stop[ray] = (start[ray] - loc) @ axis
-    loc, ray, tri = solid.ray.intersects_location(start, down, multiple_hits=True)
-    t = np.minimum((start[ray] - loc) @ axis, stop[ray])
-    sign = np.sign(solid.face_normals[tri] @ axis)  # +: entering from above (a face looking out of the face)
-    return float(np.sum(-sign * t) * spacing**2)
+    base = np.outer(uu, across[:, 0]) + np.outer(vv, across[:, 1])
+    above = along.max() + 1.0
+    floor = np.full(len(base), along.min() - 1.0)
+    loc, ray, _ = skin.ray.intersects_location(base + above * axis, np.tile(-axis, (len(base), 1)), multiple_hits=False)
+    floor[ray] = loc @ axis
+    top = max(above, floor.max() + 1.0)
+    vertices = np.vstack([base + floor[:, None] * axis, base + top * axis])
+    return _closed(vertices, len(u), len(v))
+
+
+def _closed(vertices: np.ndarray, nu: int, nv: int) -> trimesh.Trimesh:
+    """The closed height-field solid of (2 nu nv, 3) `vertices`: an nu x nv grid's underside, then its top."""
+    at = np.arange(nu * nv).reshape(nu, nv)
+    a, b, c, d = at[:-1, :-1].ravel(), at[1:, :-1].ravel(), at[1:, 1:].ravel(), at[:-1, 1:].ravel()
+    under = np.concatenate([np.stack([a, c, b], axis=1), np.stack([a, d, c], axis=1)])
+    ring = np.concatenate([at[:, 0], at[-1, 1:], at[-2::-1, -1], at[0, -2:0:-1]])  # the grid's edge, once round
+    p, q = ring, np.roll(ring, -1)
+    top = nu * nv
+    sides = np.concatenate([np.stack([p, q, q + top], axis=1), np.stack([p, q + top, p + top], axis=1)])
+    mesh = trimesh.Trimesh(vertices, np.concatenate([under, under[:, ::-1] + top, sides]), process=False)
+    return mesh if mesh.volume > 0 else trimesh.Trimesh(vertices, mesh.faces[:, ::-1], process=False)
