@@ -74,7 +74,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json", "frame.stl",
                      "mask.json", "assembly.3mf",
                      "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
-                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png",
+                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "mask_on_face.png", "rim_gap.png", "rim_gap_profile.png",
                      "rim_pressure.png", "rim_pressure_profile.png", "leak.png", "states_pressure.png"}
     assert f"report: {out / 'report.html'}" in err
     curve = written(out / "contact_curve.json")
