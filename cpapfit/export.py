@@ -97,9 +97,14 @@ def stl_bytes(mesh: trimesh.Trimesh) -> bytes:
 
 
 def threemf_bytes(mesh: trimesh.Trimesh, name: str) -> bytes:
-    """3MF with unit millimetre. trimesh's writer names objects with random UUIDs; they are
-    replaced by fixed ones so that the same solid gives the same bytes."""
-    raw = trimesh.exchange.threemf.export_3MF(trimesh.Scene({name: mesh}))
+    """3MF (unit millimetre) of one solid."""
+    return assembly_3mf_bytes({name: mesh})
+
+
+def assembly_3mf_bytes(parts: dict[str, trimesh.Trimesh]) -> bytes:
+    """3MF with unit millimetre of {name: solid}, each part where it lies. trimesh's writer names
+    objects with random UUIDs; they are replaced by fixed ones so that the same solids give the same bytes."""
+    raw = trimesh.exchange.threemf.export_3MF(trimesh.Scene(parts))
     out = io.BytesIO()
     with zipfile.ZipFile(io.BytesIO(raw)) as src, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():

@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from .align.nonrigid import Registration
-from .export import stl_bytes, threemf_bytes
+from .export import assembly_3mf_bytes, stl_bytes, threemf_bytes
 from .io.write import json_bytes, ply_bytes
 from .pipeline import Design
-from .records import contact_curve_record, design_record
+from .records import contact_curve_record, design_record, mask_record
 from .report.assemble import Provenance, report_files as assemble_report
 from .scan import Scan
 from .template import load_template
@@ -36,6 +36,9 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
         "cushion.stl": stl_bytes(d.solid),
         "cushion.3mf": threemf_bytes(d.solid, "cushion"),
         **{f"{name}.stl": stl_bytes(part) for name, part in d.mould_parts.items()},
+        "frame.stl": stl_bytes(d.frame.mesh),
+        "assembly.3mf": assembly_3mf_bytes({"cushion": d.solid, "frame": d.frame.mesh}),
+        "mask.json": json_bytes(mask_record(d)),
         "fit.json": json_bytes(design_record(d, scan)),
     }
 
@@ -61,7 +64,7 @@ def run_date() -> str:
 
 
 def report_files(d: Design, scan: Scan, files: dict[str, bytes], submit=at_once) -> dict[str, bytes]:
-    """The pictures and report.html of a design whose files (with fit.json) are `files`, as {name: bytes};
+    """The pictures and report.html of a design whose files (with fit.json and mask.json) are `files`, as {name: bytes};
     `submit`: see `assemble.report_files`."""
     provenance = Provenance(scan.source, input_sha256(Path(scan.source)), run_date())
-    return assemble_report(d, scan, json.loads(files["fit.json"]), provenance, submit)
+    return assemble_report(d, scan, json.loads(files["fit.json"]), json.loads(files["mask.json"]), provenance, submit)

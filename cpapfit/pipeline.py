@@ -21,7 +21,9 @@ from .cushion.envelope import enveloped_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import StateFit, fit_states, sleep_states
+from .dead_space import dead_space_ml, ring_clearance
 from .export import SolidError, check_closed, check_solid
+from .frame import Frame, build_frame
 from .mould import mould
 from .quality.proportions import proportions
 from .quality.gates import Quality, assess, require_quality
@@ -140,6 +142,9 @@ class Design:
     fit_params: FitParams
     states: tuple[StateFit, ...]  # both cushions in each sleep state (`sleep_states`), each at its awake force
     stock: StockComparison | None  # the stock cushion a clinic would fit on this face (None: not compared)
+    frame: Frame  # the rigid frame the cushion fits into: connector, vents, valve, headgear anchors
+    frame_checks: dict  # `check_closed` of the frame
+    dead_space_ml: float  # the air between the face and the connector's bore
 
     def preload_at(self, points: np.ndarray) -> np.ndarray:
         """(K,) mm: the pre-load at the seal-curve point nearest each of (K, 3) `points`."""
@@ -199,12 +204,15 @@ def design(
     gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape, quality))  # or refuse: rescan
     fitting = fitting_stock(mask, face, stock, params, fit_params, submit) if stock else None
     on_stage("solid and checks")
+    params = replace(params, frame_clearance_mm=ring_clearance(neutral, face.registered))  # the dead space within its limit
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
     checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
-    on_stage("pressure and leak, casting mould")
+    on_stage("pressure and leak, casting mould, frame")
     moulded = checked_mould(cushion, solid)
+    frame = build_frame(cushion, solid)
+    frame_checks = check_closed(frame.mesh, "the frame")
     fits = evaluate(face, {"custom": solid}, params, fit_params)
     states = fit_states({"custom": solid}, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
     compared = None
@@ -213,7 +221,7 @@ def design(
         compared = fitting.comparison()
         fits, states = fits | compared.fits, compared.beside(states)
     return Design(al, reg, contact, cushion, solid, checks, rim, gates, preload, moulded.parts, moulded.draft,
-                  fits, fit_params, states, compared)
+                  fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered))
 
 
 def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):

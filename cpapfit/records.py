@@ -5,12 +5,14 @@ SCHEMA_VERSION; the JSON Schema of each file is `cpapfit/schemas/<name>.schema.j
 import numpy as np
 
 from . import __version__
+from .dead_space import CUSHION_SHARE, LIMIT_ML
 from .draft import MIN_DRAFT_DEG
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
 from .evaluation.membrane import BAND_MM, MEMBRANE_MAX_MM
 from .evaluation.states import AWAKE
+from .frame import BORE_MM, CONE_MM, CONE_TAPER, GAUGE_PLANE_MM, VALVE_MM, cone_diameter_mm
 from .io.landmarks import landmarks_record
 from .pipeline import Alignment, Design
 from .scan import Scan
@@ -131,6 +133,63 @@ def evaluate_record(scan: Scan, cushion_file: str, fits: dict, params: FitParams
               "scan_units": scan.units, "cushion_file": cushion_file, **evaluation_record(fits, params)}
     record |= {"stock_fitting": stock.record()} if stock else {}
     return record | ({"states": states_record(fits, states, params.cpap_cmh2o)} if states is not None else {})
+
+
+def _mm(points) -> list:
+    return np.round(np.asarray(points, dtype=float), 3).tolist()
+
+
+def mask_record(d: Design) -> dict:
+    """mask.json: the assembled mask: the frame's connector, vents, valve, headgear anchors, the dead
+    space, how the cushion sits in the frame, materials and print notes (mm, scan frame)."""
+    f = d.frame
+    return {
+        "schema_version": SCHEMA_VERSION, "cpapfit_version": __version__, "units": "mm", "mask": d.contact.mask,
+        "parts": {"cushion": "cushion.stl", "frame": "frame.stl", "assembly": "assembly.3mf"},
+        "port": {
+            "standard": "ISO 5356-1 22 mm male conical connector", "tip_mm": _mm(f.port_tip), "axis": _mm(f.port_axis),
+            "tip_diameter_mm": float(cone_diameter_mm(0.0)), "gauge_plane_from_tip_mm": GAUGE_PLANE_MM,
+            "gauge_diameter_mm": round(float(cone_diameter_mm(GAUGE_PLANE_MM)), 4), "taper_on_diameter": CONE_TAPER,
+            "cone_length_mm": CONE_MM, "bore_mm": BORE_MM,
+            "about": "axis along the mask axis, out of the face; the cone's diameter is tip_diameter_mm + taper_on_diameter x "
+                     "the distance from the tip, up to a shoulder at cone_length_mm",
+        },
+        "vents": f.vents.record() | {"holes": [{"centre_mm": _mm(p), "direction": _mm(v)} for p, v in f.vent_holes],
+                                     "placed": "rows across the frame's dome within 35 deg of the head's up direction, each "
+                                               "hole along the dome's outward normal: away from the face and from a bed partner"},
+        "valve": None if f.valve is None else {
+            "centre_mm": _mm(f.valve[0]), "direction": _mm(f.valve[1]), "opening_mm": VALVE_MM[0], "seat_mm": VALVE_MM[1],
+            "seat_height_mm": VALVE_MM[2],
+            "about": "anti-asphyxia valve: the opening in the dome's lower side with a flat ring inside it for the flap's seat; "
+                     "the flap (not made here) closes on the seat under CPAP pressure and falls open without it",
+        },
+        "headgear": {
+            "anchors_mm": _mm(f.anchors),
+            "about": "four strap slots placed symmetrically about the mask axis (upper and lower pairs at 35 deg from the "
+                     "across-the-face direction): with equal strap tensions at mirror angles their resultant lies along the mask "
+                     "axis through the seal's centre, as the fit model assumes; unequal tensions, or a strap path not mirrored "
+                     "(a forehead strap higher than the lower straps are low), tilt the mask, which the model does not cover",
+        },
+        "dead_space_ml": round(d.dead_space_ml, 2), "dead_space_limit_ml": LIMIT_ML[d.contact.mask],
+        "dead_space_within_limit": bool(d.dead_space_ml <= LIMIT_ML[d.contact.mask]),
+        "ring_clearance_mm": round(float(d.cushion.params.frame_clearance_mm), 3),
+        "dead_space_about": "air between the face (the registered template inside the seal) and the connector's bore: the "
+                            "cushion's inside and the frame's less the frame's solid, in columns along the mask axis; the frame "
+                            "ring stands ring_clearance_mm over the nose tip, lowered from the cushion's setting where the "
+                            f"cushion's inside would take more than {100 * CUSHION_SHARE:.0f} % of the limit (a large face)",
+        "assembly": f.assembly,
+        "frame": d.frame_checks,
+        "materials": {
+            "frame": "a rigid biocompatible (ISO 10993 tested) material: a medical SLA resin, or PA12 nylon by SLS",
+            "cushion": "medical-grade (ISO 10993 tested) silicone, cast in the mould (mould_*.stl)",
+        },
+        "print_notes": [
+            "print the frame with the connector's axis vertical, port up, so that the cone is round and free of supports",
+            "check the cone with an ISO 5356-1 22 mm ring gauge before use; the vent holes (1.2 mm) must be open: clear "
+            "them with a 1.2 mm drill if the printer closes them",
+            "keep supports out of the groove that takes the cushion's end; the cushion's end is pressed into it all round",
+        ],
+    }
 
 
 def contact_curve_record(d: Design) -> dict:

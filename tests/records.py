@@ -8,7 +8,7 @@ import jsonschema
 from cpapfit.schemas import schema
 
 DATE_EPOCH = "1700000000"  # SOURCE_DATE_EPOCH of the tests' designs: the run date (to the minute) their reports state
-BY_FILE = {"fit.json": "fit", "manifest.json": "manifest", "contact_curve.json": "contact_curve"}
+BY_FILE = {"fit.json": "fit", "manifest.json": "manifest", "contact_curve.json": "contact_curve", "mask.json": "mask"}
 
 
 def written(path: Path, name: str | None = None) -> dict:

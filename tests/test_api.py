@@ -26,6 +26,8 @@ def test_the_python_quick_start_designs_and_saves_files_that_follow_the_schemas(
     curve = written(folder / "contact_curve.json")
     assert np.allclose(curve["points"], result.design.contact.curve, atol=1e-4)  # mm, as designed
     assert trimesh.load(folder / "cushion.stl").is_watertight and not list(folder.parent.glob(".*"))  # no staging left
+    mask = written(folder / "mask.json")  # the nasal frame: no valve, dead space within 120 ml
+    assert mask["valve"] is None and 20.0 < mask["dead_space_ml"] <= 120.0 and mask["assembly"]["interference_mm3"] < 0.01
     manifest = written(folder / "manifest.json")
     assert sorted(manifest["files"]) == sorted(result.files) == sorted(p.name for p in folder.iterdir() if p.name != "manifest.json")
     (tmp_path / "mine").mkdir()

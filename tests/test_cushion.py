@@ -71,9 +71,10 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     manifest = written(out / "manifest.json")
     names = {p.name for p in out.iterdir()} - {"manifest.json"}
     assert set(manifest["files"]) == names and manifest["parameters"]["mask"] == "oronasal"
-    assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json",
+    assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json", "frame.stl",
+                     "mask.json", "assembly.3mf",
                      "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
-                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "rim_gap.png", "rim_gap_profile.png",
+                     "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "mask_on_face.png", "rim_gap.png", "rim_gap_profile.png",
                      "rim_pressure.png", "rim_pressure_profile.png", "leak.png", "states_pressure.png"}
     assert f"report: {out / 'report.html'}" in err
     curve = written(out / "contact_curve.json")
@@ -85,6 +86,11 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert stl.is_watertight
     fit = written(out / "fit.json")
     assert fit["units"] == "mm" and fit["mask"] == "oronasal" and fit["cushion"]["watertight"]
+    mask = written(out / "mask.json")  # the oronasal frame: its valve, dead space within 300 ml, the airway closed
+    assert mask["valve"]["opening_mm"] == 12.0 and 50.0 < mask["dead_space_ml"] <= 300.0 and mask["assembly"]["airway_closed"]
+    assert mask["vents"]["worst_error_fraction"] <= 0.25 and mask["frame"]["watertight"]
+    assembly = trimesh.load(out / "assembly.3mf")
+    assert sorted(assembly.geometry) == ["cushion", "frame"] and all(m.is_watertight for m in assembly.geometry.values())
     for key in ("cpap_cmh2o", "headgear_force_n", "custom", "stock", "stock_fitting", "tissue_model", "cpapfit_version"):
         assert key in fit
     evaluated = tmp_path / "evaluated.json"

@@ -30,27 +30,28 @@ def designed1(nasal1):
 
 @pytest.fixture(scope="session")
 def report(designed1, tmp_path_factory):
-    """(folder, {name: bytes}, fit record) of the report written to a folder."""
+    """(folder, {name: bytes}, fit record, mask record) of the report written to a folder."""
     scan, d = designed1
-    fit = json.loads(design_files(d, scan)["fit.json"])
-    files = report_files(d, scan, fit, PROVENANCE)
+    written = design_files(d, scan)
+    fit, mask = json.loads(written["fit.json"]), json.loads(written["mask.json"])
+    files = report_files(d, scan, fit, mask, PROVENANCE)
     folder = tmp_path_factory.mktemp("report")
     for name, data in files.items():
         (folder / name).write_bytes(data)
     (folder / "fit.json").write_text(json.dumps(fit))
-    return folder, files, fit
+    return folder, files, fit, mask
 
 
 EXPECTED_SIZES = {  # (width, height) px: panels of 640 x 480 with titles, colour bars, legends
     "scan_landmarks.png": (780, 570), "registration_residual.png": (780, 570), "contact_curve.png": (1300, 605),
-    "cushion_on_face.png": (1300, 570), "rim_gap.png": (1420, 605), "rim_gap_profile.png": (900, 420),
+    "cushion_on_face.png": (1300, 570), "mask_on_face.png": (1300, 570), "rim_gap.png": (1420, 605), "rim_gap_profile.png": (900, 420),
     "rim_pressure.png": (1420, 605), "rim_pressure_profile.png": (900, 420), "leak.png": (1300, 605),
     "states_pressure.png": (2700, 1125),
 }
 
 
 def test_every_picture_is_there_of_its_size_and_not_blank(report):
-    _, files, _ = report
+    _, files, _, _ = report
     assert set(EXPECTED_SIZES) | {"report.html"} == set(files)
     for name, size in EXPECTED_SIZES.items():
         image = np.asarray(Image.open(io.BytesIO(files[name])).convert("RGB"))
@@ -117,19 +118,19 @@ def test_holes_under_the_seal_and_low_confidence_are_warned(designed1):
 def test_the_report_advises_a_rescan_exactly_when_fit_json_does(designed1, report):
     """The report's "Rescan advised" and its reasons are the quality gates' (fit.json), not its own."""
     scan, d = designed1
-    _, files, fit = report
+    _, files, fit, mask = report
     assert fit["rescan_advised"] is False and "Rescan advised" not in files["report.html"].decode()
     message = "the scan covers 50 % of the nasal mask's seal region; rescan facing the camera (rescan advised below 75 %)"
     flagged = {**fit, "rescan_advised": True, "warnings": [{"code": "coverage", "message": message}]}
-    page = report_files(d, scan, flagged, PROVENANCE)["report.html"].decode()
+    page = report_files(d, scan, flagged, mask, PROVENANCE)["report.html"].decode()
     assert "Rescan advised." in page and "The scan covers 50 % of the nasal mask" in page
     assert gate_notices(flagged) == [Notice("rescan", message[0].upper() + message[1:] + ".")]
 
 
-def shown_numbers_match(shown: list, fit: dict) -> None:
-    """Every [data-key, data-scale, text] shown equals fit.json's value at that key, to the digits shown."""
+def shown_numbers_match(shown: list, record: dict) -> None:
+    """Every [data-key, data-scale, text] shown equals the record's value at that key, to the digits shown."""
     for key, scale, text in shown:
-        value = fit
+        value = record
         for part in key.split("."):
             value = value[int(part)] if isinstance(value, list) else value[part]
         decimals = len(text.split(".")[1]) if "." in text else 0
@@ -138,12 +139,14 @@ def shown_numbers_match(shown: list, fit: dict) -> None:
 
 def test_report_html_in_headless_chromium_offline(report, tmp_path):
     assert CHROMIUM.exists(), "Debian's chromium is needed: `make test` installs it (apt-get install chromium)"
-    folder, _, fit = report
+    folder, _, fit, mask = report
     browser = Chromium(tmp_path / "profile")
     try:
         browser.open(folder / "report.html")
         browser.settle(1.5)
         shown = browser.evaluate("[...document.querySelectorAll('[data-key]')].map(e => [e.dataset.key, e.dataset.scale, e.textContent])")
+        shown_mask = browser.evaluate("[...document.querySelectorAll('[data-mask-key]')]"
+                                      ".map(e => [e.dataset.maskKey, e.dataset.scale, e.textContent])")
         box = browser.evaluate("(() => { const r = document.querySelector('#viewer .gl-container canvas').getBoundingClientRect();"
                                " return {x: r.x + scrollX, y: r.y + scrollY, width: r.width, height: r.height}; })()")
         shot = np.asarray(Image.open(io.BytesIO(browser.screenshot(clip=box))).convert("RGB")).astype(int)
@@ -157,6 +160,8 @@ def test_report_html_in_headless_chromium_offline(report, tmp_path):
     assert {"headgear_force_n", "custom.pressure_max_kpa", "stock.leak_l_min", "stock.headgear_force_n", "custom.window_fraction",
             "cushion.min_wall_mm", "states.2.custom.leak_l_min", "states.7.stock.pressure_max_kpa"} <= keys
     shown_numbers_match(shown, fit)
+    assert {"dead_space_ml", "vents.flow_l_min.4_cmh2o", "vents.flow_l_min.10_cmh2o", "vents.flow_l_min.20_cmh2o"} <= {k for k, _, _ in shown_mask}
+    shown_numbers_match(shown_mask, mask)
     skin = (np.abs(shot - [217, 192, 173]).max(axis=2) < 60).mean()  # the face, shaded
     green = ((shot[..., 1] > shot[..., 0] + 30) & (shot[..., 1] > shot[..., 2])).mean()  # the custom cushion, in the window
     assert skin > 0.1 and green > 0.005, (skin, green)
@@ -164,8 +169,8 @@ def test_report_html_in_headless_chromium_offline(report, tmp_path):
 
 def test_report_is_deterministic(designed1, report):
     scan, d = designed1
-    _, files, fit = report
-    again = report_files(d, scan, fit, PROVENANCE)
+    _, files, fit, mask = report
+    again = report_files(d, scan, fit, mask, PROVENANCE)
     assert again.keys() == files.keys() and all(again[n] == files[n] for n in files)
 
 

@@ -1,5 +1,5 @@
 """The report of a design as files: the pictures (PNG) and report.html, from the design, the
-scan, the fit.json record and, once evaluated, each cushion's rim pressure.
+scan, the fit.json and mask.json records and, once evaluated, each cushion's rim pressure.
 
 Pure: the caller (cpapfit/outputs.py) supplies what comes from outside (input hash, date) and,
 optionally, a worker process (`work.py`) that draws the design's own pictures meanwhile."""
@@ -127,8 +127,8 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
     ]
 
 
-def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, face: Face, whole, close) -> list[Picture]:
-    """The scan understood: landmarks, registration residual, contact curve, cushion on the face."""
+def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, frame: Face, face: Face, whole, close) -> list[Picture]:
+    """The scan understood: landmarks, registration residual, contact curve, cushion and assembled mask on the face."""
     sim = al.similarity
     res = reg.residual[reg.valid]
     return [
@@ -148,12 +148,18 @@ def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion:
         Picture("cushion_on_face.png", "The custom cushion on the face",
                 "The printable cushion (blue) as designed on the scan.",
                 pic.cushion_picture(face, cushion.vertices, cushion.faces, sim)),
+        Picture("mask_on_face.png", "The assembled mask on the face",
+                "The cushion (blue) in its frame (white): the frame carries the 22 mm connector for the hose, the exhaust vents "
+                "on its upper side, the four headgear strap slots and, on an oronasal mask, the anti-asphyxia valve's opening "
+                "below the connector. The table above gives the mask's figures.",
+                pic.mask_picture(face, cushion, frame, sim)),
     ]
 
 
-def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submit=at_once) -> dict[str, bytes]:
-    """The pictures and report.html of a design, as {name: bytes}. `submit(fn, *args)` (a process
-    pool's, or `at_once`) draws the design's own pictures while this process draws the evaluation's."""
+def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance: Provenance, submit=at_once) -> dict[str, bytes]:
+    """The pictures and report.html of a design (`fit` its fit.json record, `mask_record` its mask.json),
+    as {name: bytes}. `submit(fn, *args)` (a process pool's, or `at_once`) draws the design's own
+    pictures while this process draws the evaluation's."""
     sim, mask = d.alignment.similarity, d.contact.mask
     rims, window_kpa = evaluated_rims(d), d.fit_params.window_kpa
     face = scan_face(scan, d)
@@ -161,7 +167,8 @@ def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submi
     whole = shoot(face, whole_face_view(sim), scene)
     close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])), scene)
     cushion = Face(d.solid.vertices, d.solid.faces)
-    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close)
+    frame = Face(d.frame.mesh.vertices, d.frame.mesh.faces)
+    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, frame, face, whole, close)
     scale = pressure_scale(rims, window_kpa)
     later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     later.append(state_picture(close, d, scale))
@@ -177,5 +184,5 @@ def report_files(d: Design, scan: Scan, fit: dict, provenance: Provenance, submi
              ("cushion parameters", ", ".join(f"{k} {v:g}" for k, v in vars(d.cushion.params).items())))
     pictures = early.result() + later
     page = Page(f"{mask.capitalize()} CPAP cushion for {provenance.source.rstrip('/').split('/')[-1]}", fit, tuple(notices),
-                tuple(pictures), trace, viewer_html(fig))
+                tuple(pictures), trace, viewer_html(fig), mask_record)
     return {**{p.name: p.png for p in pictures}, "report.html": report_html(page)}

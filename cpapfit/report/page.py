@@ -1,10 +1,11 @@
 """report.html: one self-contained page (pictures inline, plotly.js inline, no network) that a
 clinician reads at a glance: warnings, the custom cushion's numbers beside the stock cushion's, the
-3-D view, the pictures, all
-numbers of fit.json with units, and where the result came from.
+assembled mask's figures, the 3-D view, the pictures, all numbers of fit.json with units, and where
+the result came from.
 
 Every number taken from fit.json is shown in an element with data-key (its path in fit.json) and
-data-scale (the factor applied for display, e.g. 100 for a percentage), so tests can compare."""
+data-scale (the factor applied for display, e.g. 100 for a percentage), and every one from mask.json
+with data-mask-key, so tests can compare."""
 
 import base64
 import html
@@ -17,7 +18,23 @@ from ..evaluation.fit import CUSHIONS
 UNITS = (
     ("_fraction", "%", 100.0, 1), ("_mm", "mm", 1.0, 2), ("_kpa", "kPa", 1.0, 2), ("_mmhg", "mmHg", 1.0, 1),
     ("_cmh2o", "cmH₂O", 1.0, 1), ("_force_n", "N", 1.0, 1), ("_l_min", "L/min", 1.0, 2), ("_cv", "", 1.0, 3),
-    ("_deg", "°", 1.0, 1), ("_mm2", "mm²", 1.0, 0),
+    ("_deg", "°", 1.0, 1), ("_mm2", "mm²", 1.0, 0), ("_ml", "ml", 1.0, 1),
+)
+MASK_ROWS = (  # (path in mask.json, label, unit, decimals)
+    ("port.standard", "hose connector", "", 0),
+    ("port.tip_mm", "connector's tip (scan frame)", "mm", 1),
+    ("port.axis", "connector's axis, out of the face (scan frame)", "", 3),
+    ("vents.count", "exhaust vent holes", "", 0),
+    ("vents.diameter_mm", "vent hole diameter", "mm", 2),
+    ("vents.flow_l_min.4_cmh2o", "vent flow at 4 cmH₂O", "L/min", 1),
+    ("vents.flow_l_min.10_cmh2o", "vent flow at 10 cmH₂O", "L/min", 1),
+    ("vents.flow_l_min.20_cmh2o", "vent flow at 20 cmH₂O", "L/min", 1),
+    ("valve.opening_mm", "anti-asphyxia valve opening (oronasal masks)", "mm", 1),
+    ("dead_space_ml", "dead space (air between the face and the connector)", "ml", 1),
+    ("dead_space_limit_ml", "dead space limit", "ml", 0),
+    ("ring_clearance_mm", "frame ring over the nose tip", "mm", 1),
+    ("assembly.interference_mm3", "cushion and frame overlap (interference)", "mm³", 3),
+    ("assembly.airway_closed", "airway closed from the connector to the face but at the vents and valve", "", 0),
 )
 HEADLINE = (  # (key under fit["custom"|"stock"|"generic"], label)
     ("contact_fraction", "rim in contact with the skin"),
@@ -54,6 +71,7 @@ class Page:
     pictures: tuple
     traceability: tuple
     viewer: str
+    mask: dict  # the mask.json record
 
 
 def unit_of(key: str) -> tuple[str, float, int]:
@@ -64,15 +82,18 @@ def unit_of(key: str) -> tuple[str, float, int]:
     return "", 1.0, 3
 
 
-def value_cell(path: str, value, tag: str = "td") -> str:
-    """A cell showing a fit.json value; numbers carry data-key and data-scale."""
+def value_cell(path: str, value, tag: str = "td", key: str = "key", decimals: int | None = None) -> str:
+    """A cell showing a record's value; numbers carry data-`key` (fit.json's: data-key) and data-scale,
+    shown to `decimals` (None: by the path's unit), a list's numbers to `decimals` too."""
+    if isinstance(value, list) and decimals is not None:
+        value = [round(v, decimals) for v in value]
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         text = {True: "yes", False: "no", None: "—"}.get(value, value) if isinstance(value, (bool, type(None))) else value
         text = ", ".join(map(str, text)) if isinstance(text, list) else str(text)
         return f"<{tag}>{html.escape(text)}</{tag}>"
-    unit, factor, decimals = unit_of(path)
-    shown = f"{value * factor:.{decimals}f}" if isinstance(value, float) else str(value)
-    return f'<{tag} class="num" data-key="{path}" data-scale="{factor:g}">{shown}</{tag}>'
+    unit, factor, by_unit = unit_of(path)
+    shown = f"{value * factor:.{by_unit if decimals is None else decimals}f}" if isinstance(value, float) else str(value)
+    return f'<{tag} class="num" data-{key}="{path}" data-scale="{factor:g}">{shown}</{tag}>'
 
 
 def lookup(fit: dict, path: str):
@@ -167,6 +188,15 @@ def states_table(fit: dict) -> str:
             f'<table class="states"><thead><tr><th>state</th>{head}</tr></thead><tbody>{"".join(body)}</tbody></table>')
 
 
+def mask_table(mask: dict) -> str:
+    """The assembled mask's figures from mask.json: connector, vents, valve, dead space, the airway."""
+    rows = "".join(f"<tr><th>{html.escape(label)}</th>{value_cell(path, lookup(mask, path), key='mask-key', decimals=decimals)}"
+                   f"<td>{html.escape(unit)}</td></tr>" for path, label, unit, decimals in MASK_ROWS)
+    return ("<h2>The assembled mask</h2>\n<p>The cushion fits into a rigid frame (frame.stl; both in place in assembly.3mf) that "
+            "takes the CPAP hose and the headgear; mask.json holds these figures and the rest.</p>\n"
+            f'<table class="mask"><tbody>{rows}</tbody></table>')
+
+
 def numbers_table(fit: dict) -> str:
     """Every value of fit.json, by its path, with its unit."""
     rows = "".join(f"<tr><th><code>{html.escape(p)}</code></th>{value_cell(p, v)}<td>{html.escape(unit_of(p)[0])}</td></tr>"
@@ -223,6 +253,7 @@ def report_html(page: Page) -> bytes:
 {settings_line(page.fit)}
 {headline_table(page.fit)}
 {states_table(page.fit)}
+{mask_table(page.mask)}
 <h2>3-D view</h2>
 <p>Drag to turn, scroll to zoom, hover over a rim for its value. The buttons show the custom cushion or the other cushion's rim.</p>
 <div id="viewer-box">{page.viewer}</div>

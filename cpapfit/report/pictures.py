@@ -24,6 +24,7 @@ SKIN = np.array([0.85, 0.68, 0.58])
 REGION_COLOURS = {"nasal": np.array([0.15, 0.45, 0.95]), "oronasal": np.array([0.95, 0.3, 0.15])}
 CURVE_COLOUR = np.array([1.0, 1.0, 1.0])
 CUSHION_COLOUR = np.array([0.45, 0.7, 0.95])
+FRAME_COLOUR = np.array([0.92, 0.92, 0.88])  # a white resin
 RESIDUAL_MAX_MM = 1.0
 CUSHION_FRAME_MM = 150.0  # picture height around the cushion
 ON_SCAN, OFF_SCAN = "#1f78b4", "#e31a1c"
@@ -93,13 +94,31 @@ def contact_picture(shots: tuple[Shot, Shot], curve: np.ndarray, on_scan: np.nda
 
 def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similarity: Similarity) -> bytes:
     """PNG: the cushion solid ((N, 3) mm, (M, 3)) on the face, from the front and turned 50 degrees."""
+    return solids_picture(face, ((vertices, faces, CUSHION_COLOUR),), similarity, "The custom cushion on the face")
+
+
+def mask_picture(face: Face, cushion: Face, frame: Face, similarity: Similarity) -> bytes:
+    """PNG: the assembled mask, the cushion and the frame (mm, scan frame), on the face, from the front and turned 50 degrees."""
+    return solids_picture(face, ((cushion.vertices, cushion.faces, CUSHION_COLOUR), (frame.vertices, frame.faces, FRAME_COLOUR)),
+                          similarity, "The assembled mask on the face")
+
+
+def solids_picture(face: Face, solids: tuple, similarity: Similarity, heading: str) -> bytes:
+    """PNG: solids ((vertices (N, 3) mm, faces (M, 3), colour (3,) in [0, 1]), ...) on the face, from
+    the front and turned 50 degrees, framed on them."""
     skin = np.tile(GREY_SKIN, (len(face.vertices), 1)) if face.albedo is None else face.albedo
-    both = Face(np.vstack([face.vertices, vertices]), np.vstack([face.faces, faces + len(face.vertices)]),
-                np.vstack([skin, np.tile(CUSHION_COLOUR, (len(vertices), 1))]))
-    extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(vertices, axis=0).max()))
+    vertices, faces, colours, count = [face.vertices], [face.faces], [skin], len(face.vertices)
+    for v, f, colour in solids:
+        vertices.append(v)
+        faces.append(f + count)
+        colours.append(np.tile(colour, (len(v), 1)))
+        count += len(v)
+    both = Face(np.vstack(vertices), np.vstack(faces), np.vstack(colours))
+    parts = np.vstack(vertices[1:])
+    extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(parts, axis=0).max()))
     scene = scene_of(both.vertices, both.faces)
-    images = [shoot(both, face_view(similarity, vertices.mean(axis=0), extent, yaw), scene).image for yaw in (0.0, 50.0)]
-    return panels_png(images, ["front", "turned 50° (patient's right side)"], "The custom cushion on the face")
+    images = [shoot(both, face_view(similarity, parts.mean(axis=0), extent, yaw), scene).image for yaw in (0.0, 50.0)]
+    return panels_png(images, ["front", "turned 50° (patient's right side)"], heading)
 
 
 def rim_image(shot: Shot, points: np.ndarray, values: np.ndarray, scale: ColourScale, open_: np.ndarray | None = None) -> np.ndarray:

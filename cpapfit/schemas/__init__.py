@@ -6,7 +6,7 @@ from functools import lru_cache
 from importlib.resources import files
 
 SCHEMA_VERSION = 1
-NAMES = ("fit", "contact_curve", "landmarks", "manifest")
+NAMES = ("fit", "contact_curve", "landmarks", "manifest", "mask")
 
 
 @lru_cache(maxsize=None)
