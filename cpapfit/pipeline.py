@@ -192,19 +192,12 @@ def design(
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
     placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality)
-    al, reg, by_shape = placement.alignment, placement.registration, placement.by_shape
-    on_stage("contact")
-    face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage below
-    contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
-    on_stage("cushion")
-    neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
-    edge = neutral.grid(256, 2)[:, 0]
-    rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
-    shape = proportions(load_template().vertices, al.similarity, reg)
-    gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, by_shape, quality))  # or refuse: rescan
+    al, reg = placement.alignment, placement.registration
+    judged = assessed(scan, mask, placement, params, quality, on_stage)  # or refused: rescan
+    face, contact = judged.face, judged.contact
     fitting = fitting_stock(mask, face, stock, params, fit_params, submit) if stock else None
     on_stage("solid and checks")
-    params = replace(params, frame_clearance_mm=ring_clearance(neutral, face.registered))  # the dead space within its limit
+    params = replace(params, frame_clearance_mm=ring_clearance(judged.neutral, face.registered))  # the dead space within its limit
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
@@ -220,8 +213,38 @@ def design(
         on_stage("the stock cushion a clinic would fit")
         compared = fitting.comparison()
         fits, states = fits | compared.fits, compared.beside(states)
-    return Design(al, reg, contact, cushion, solid, checks, rim, gates, preload, moulded.parts, moulded.draft,
+    return Design(al, reg, contact, cushion, solid, checks, judged.rim, judged.quality, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered))
+
+
+@dataclass(frozen=True)
+class Assessed:
+    """The seal carried onto a scan and the scan judged for it: the `face` cushions are pressed onto,
+    the `contact`, the `neutral` cushion (before its pre-load), its `rim` against the scan, and the
+    `quality` gates (none refuses)."""
+
+    face: Face
+    contact: Contact
+    neutral: Cushion
+    rim: RimGap
+    quality: Quality
+
+
+def assessed(scan: Scan, mask: str, placement: Placement, params: CushionParams = CushionParams(),
+             quality: QualityParams = QualityParams(), on_stage: Callable[[str], None] = _silent) -> Assessed:
+    """Stages contact and quality: the seal carried onto the placed template's scan, the cushion
+    designed on it without pre-load, and the quality gates; raises QualityError where one refuses."""
+    al, reg = placement.alignment, placement.registration
+    on_stage("contact")
+    face = face_for(scan, al, reg)  # its scan surface (and the surface's spatial indexes) serve every stage after
+    contact = transfer_contact(load_template(), reg.vertices, face.scan, mask)
+    on_stage("cushion")
+    neutral = design_cushion(contact, face.axis, face.up, reg.vertices[NOSE_TIP], params)
+    edge = neutral.grid(256, 2)[:, 0]
+    rim = rim_gap(edge, contact.normals_at(edge), scan, face.scan)
+    shape = proportions(load_template().vertices, al.similarity, reg)
+    gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, placement.by_shape, quality))
+    return Assessed(face, contact, neutral, rim, gates)
 
 
 def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):

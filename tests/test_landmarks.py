@@ -520,7 +520,7 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
     the geometry cannot pull it back: this design was made unflagged. Past 5 mm of spread the
     template is also placed by the shape alone, here within 1 mm of the truth; the two seal regions
     lie 1.9 mm apart, past the 1.5 mm flag: flagged."""
-    from cpapfit.pipeline import design, place_template
+    from cpapfit.pipeline import assessed, place_template
 
     scan, truth = bare_subject(tmp_path, 9, 17)  # turned 19 deg, pitched 23 deg
     band = TEMPLATE.regions["oronasal"].band
@@ -529,7 +529,7 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
     assert placed.alignment.landmarks.path == "render" and 5.0 < reg.landmark_spread_mm < 7.0 and by_shape is not None
     assert np.linalg.norm(reg.vertices[band] - truth[band], axis=1).mean() > 2.0
     assert np.linalg.norm(by_shape[band] - truth[band], axis=1).mean() < 1.0
-    gates = {g.code: g for g in design(scan, "oronasal", placement=placed, stock=None).quality.gates}
+    gates = {g.code: g for g in assessed(scan, "oronasal", placed).quality.gates}
     assert gates["shape_apart_mm"].flag and not gates["landmark_spread_mm"].flag
 
 
@@ -539,7 +539,7 @@ def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape
     apart; with the mirror term the face registered at their tenth weight lies nearer the truth and
     the spread alone, 13.7 mm, is past 10 mm. Either way the design (and the landmarks command, which
     writes what a design uses) takes the shape's placement, flagged landmark-free and saying why."""
-    from cpapfit.pipeline import design, place_template
+    from cpapfit.pipeline import assessed, place_template
 
     scan, truth = bare_subject(tmp_path, 9, 0)
     band = TEMPLATE.regions["oronasal"].band
@@ -547,10 +547,8 @@ def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape
     al = placed.alignment
     assert al.landmarks.path == "fallback" and placed.by_shape is None
     assert "from their places on the registered face" in al.landmarks.rejected or "placed the mask region a mean" in al.landmarks.rejected
-    d = design(scan, "oronasal", placement=placed, stock=None)
-    assert d.alignment.landmarks.path == "fallback"
-    assert np.linalg.norm(d.registration.vertices[band] - truth[band], axis=1).mean() < 1.5
-    (gate,) = [g for g in d.quality.flags if g.code == "landmark_free"]
+    assert np.linalg.norm(placed.registration.vertices[band] - truth[band], axis=1).mean() < 1.5
+    (gate,) = [g for g in assessed(scan, "oronasal", placed).quality.flags if g.code == "landmark_free"]
     assert "shape alone" in gate.message
 
 
