@@ -52,6 +52,16 @@ def nasal1(phantom1_dir):
         return api_design(load_scan(phantom1_dir), "nasal", params=Params(stock="gauge"))
 
 
+@pytest.fixture
+def placed1(nasal1, monkeypatch):
+    """`pipeline.place_template` answering with seed 1's placement (`nasal1`'s), for tests of the stages after it."""
+    from cpapfit import pipeline
+
+    placement = pipeline.Placement(nasal1.design.alignment, nasal1.design.registration, None)
+    monkeypatch.setattr(pipeline, "place_template", lambda *args, **kwargs: placement)
+    return placement
+
+
 @pytest.fixture(scope="session")
 def placed_subjects(tmp_path_factory):
     """seed -> (phantom, capture scan, `Placement`) of a synthetic subject, made once (both masks' designs share it)."""

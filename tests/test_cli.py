@@ -116,7 +116,7 @@ def test_missing_intrinsics_and_truncated_depth(cli, capture):
 
 
 @pytest.mark.parametrize("thicker", ["wall", "membrane"])
-def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, monkeypatch, thicker):
+def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, placed1, monkeypatch, thicker):
     """Demand a wall (or membrane) thicker than the design can give: the check refuses, and no file is written."""
     import cpapfit.pipeline as pipeline
     from cpapfit.export import check_solid
@@ -128,7 +128,7 @@ def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path,
 
     monkeypatch.setattr(pipeline, "check_solid", demanding)
     out = tmp_path / "out"
-    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--out", out), "printability", "membrane_min_mm")
+    assert_one_line_error(*cli("design", phantom1_dir, "--mask", "nasal", "--stock", "none", "--out", out), "printability", "membrane_min_mm")
     assert not out.exists() or not any(out.iterdir())
 
 
@@ -217,7 +217,7 @@ def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
     assert design_summary(fit).endswith("rim-to-skin gap before pre-load no scan data under the rim")
 
 
-def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, monkeypatch):
+def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, placed1, monkeypatch):
     """A seal curve that crosses itself (two opposite stretches swapped, as a misplaced template
     can carry) puts the cushion's rim off the skin: refused by the rim gate before any solid is
     built, saying what to do, nothing written. A cushion that still crosses itself is refused too."""

@@ -65,7 +65,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     out.mkdir()
     (out / "manifest.json").write_text(json.dumps({"files": ["cushion.stl", "cushion_v1.stl"]}))
     (out / "cushion_v1.stl").write_text("an earlier design's file")
-    code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--verbose", "--out", out)
+    code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--stock", "gauge", "--verbose", "--out", out)
     assert code == 0, err
     assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
     manifest = written(out / "manifest.json")
