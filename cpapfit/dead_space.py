@@ -1,5 +1,5 @@
 """The mask's dead space: the air between the face and the connector's bore, which the patient
-breathes back before fresh air (ml), held within LIMIT_ML by lowering the frame ring towards the
+breathes back before fresh air (ml), held within DEAD_SPACE_LIMIT_ML by lowering the frame ring towards the
 face where the face is large (`ring_clearance`).
 
 The air is the inside of the cushion's sheet (its face-side opening carried back into the head
@@ -19,10 +19,10 @@ from .cushion.nurbs import FRAME_RING_MM, Cushion
 from .export import to_manifold, to_trimesh
 from .frame import Frame
 from .mould import plug
+from .thresholds import DEAD_SPACE_LIMIT_ML
 
 COLUMN_MM = 1.0
 BEHIND_MM = 40.0  # the seal's opening carried this far back into the head: behind any skin inside it
-LIMIT_ML = {"nasal": 120.0, "oronasal": 300.0}
 CUSHION_SHARE = 5.0 / 6.0  # of the limit, the most the cushion's inside may take before the ring comes down: the frame's air is the rest
 LEAST_CLEARANCE_MM = 5.0  # the ring at least this far over the nose tip: the tip below the frame's lowest face (its groove, 4 mm)
 
@@ -39,7 +39,7 @@ def ring_clearance(cushion: Cushion, skin: trimesh.Trimesh) -> float:
     the cushion takes more than CUSHION_SHARE of the dead-space limit, by the excess over the ring's
     area (each mm the ring comes down takes about the ring's area of air), to LEAST_CLEARANCE_MM at least."""
     a, b = np.array(FRAME_RING_MM[cushion.mask]) / 2
-    excess_mm3 = volume_in_front(_inside(cushion), skin, cushion.axis) - 1000.0 * CUSHION_SHARE * LIMIT_ML[cushion.mask]
+    excess_mm3 = volume_in_front(_inside(cushion), skin, cushion.axis) - 1000.0 * CUSHION_SHARE * DEAD_SPACE_LIMIT_ML[cushion.mask]
     most = cushion.params.frame_clearance_mm
     return float(np.clip(most - excess_mm3 / (np.pi * a * b), min(LEAST_CLEARANCE_MM, most), most))
 

@@ -5,7 +5,7 @@ SCHEMA_VERSION; the JSON Schema of each file is `cpapfit/schemas/<name>.schema.j
 import numpy as np
 
 from . import __version__
-from .dead_space import CUSHION_SHARE, LIMIT_ML
+from .dead_space import CUSHION_SHARE
 from .draft import MIN_DRAFT_DEG
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
@@ -18,6 +18,7 @@ from .pipeline import Alignment, Design
 from .scan import Scan
 from .schemas import SCHEMA_VERSION
 from .stock_fit import StockComparison
+from .thresholds import DEAD_SPACE_LIMIT_ML
 
 
 def mask_dimensions(d: Design) -> dict:
@@ -170,8 +171,8 @@ def mask_record(d: Design) -> dict:
                      "axis through the seal's centre, as the fit model assumes; unequal tensions, or a strap path not mirrored "
                      "(a forehead strap higher than the lower straps are low), tilt the mask, which the model does not cover",
         },
-        "dead_space_ml": round(d.dead_space_ml, 2), "dead_space_limit_ml": LIMIT_ML[d.contact.mask],
-        "dead_space_within_limit": bool(d.dead_space_ml <= LIMIT_ML[d.contact.mask]),
+        "dead_space_ml": round(d.dead_space_ml, 2), "dead_space_limit_ml": DEAD_SPACE_LIMIT_ML[d.contact.mask],
+        "dead_space_within_limit": bool(d.dead_space_ml <= DEAD_SPACE_LIMIT_ML[d.contact.mask]),
         "ring_clearance_mm": round(float(d.cushion.params.frame_clearance_mm), 3),
         "dead_space_about": "air between the face (the registered template inside the seal) and the connector's bore: the "
                             "cushion's inside and the frame's less the frame's solid, in columns along the mask axis; the frame "

@@ -137,6 +137,9 @@ class QualityParams:
     lips_apart_refuse_mm: float = 11.0
 
 
+# --- The mask's frame (`dead_space.py`) ---
+DEAD_SPACE_LIMIT_ML = {"nasal": 120.0, "oronasal": 300.0}  # the most air between the face and the connector, ml
+
 # --- Evaluation (`cpapfit/evaluation/`) ---
 MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate
 

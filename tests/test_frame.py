@@ -14,7 +14,8 @@ from scipy.spatial import cKDTree
 from cpapfit.cushion.generic import contact_on, template_cushion
 from cpapfit.cushion.solid import cushion_solid
 from cpapfit.cushion.nurbs import FRAME_RING_MM
-from cpapfit.dead_space import CUSHION_SHARE, LIMIT_ML, _inside, ring_clearance, volume_in_front
+from cpapfit.dead_space import CUSHION_SHARE, _inside, ring_clearance, volume_in_front
+from cpapfit.thresholds import DEAD_SPACE_LIMIT_ML
 from cpapfit.export import check_closed, stl_bytes, to_manifold
 from cpapfit.frame import CONE_MM, build_frame, cone_diameter_mm, mask_frame
 from cpapfit.metrics import sliced_diameters
@@ -98,7 +99,7 @@ def test_the_ring_comes_down_where_the_cushion_holds_too_much_air(monkeypatch):
     cushion, skin = template_cushion("oronasal"), load_template().mesh()
     assert ring_clearance(cushion, skin) == cushion.params.frame_clearance_mm  # the template's face: within the limit
     inside_ml = volume_in_front(_inside(cushion), skin, cushion.axis) / 1000.0
-    monkeypatch.setitem(LIMIT_ML, "oronasal", (inside_ml - 15.0) / CUSHION_SHARE)  # a limit the cushion's inside is 15 ml over
+    monkeypatch.setitem(DEAD_SPACE_LIMIT_ML, "oronasal", (inside_ml - 15.0) / CUSHION_SHARE)  # a limit the cushion's inside is 15 ml over
     lowered = ring_clearance(cushion, skin)
     a, b = np.array(FRAME_RING_MM["oronasal"]) / 2
     assert lowered == pytest.approx(cushion.params.frame_clearance_mm - 15000.0 / (np.pi * a * b), abs=1e-6)
