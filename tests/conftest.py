@@ -19,14 +19,19 @@ SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 # (pytest-xdist's loadgroup), so that it is made once, not once in each worker.
 SHARED_WORK = ("placed_subjects", "designed", "nasal1", "report", "twice", "phantoms", "case", "closed_and_open", "rotated_stl",
                "ict1", "frontal_mesh", "ict_capture", "bare_and_worn")
+WHOLE_DESIGNS = ("designed", "nasal1", "batched")  # fixtures that make whole designs: their tests are `slow`
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups off the markers
 def pytest_collection_modifyitems(items):
-    """Each test using one of SHARED_WORK goes in that fixture's xdist group (the first it uses)."""
+    """Each test using one of SHARED_WORK goes in that fixture's xdist group (the first it uses); a
+    test using one of WHOLE_DESIGNS is `slow`."""
     for item in items:
         shared = [name for name in SHARED_WORK if name in item.fixturenames]
         if shared:
             item.add_marker(pytest.mark.xdist_group(shared[0]))
+        if any(name in item.fixturenames for name in WHOLE_DESIGNS):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(scope="session")

@@ -22,6 +22,7 @@ def assert_one_line_error(code, out, err, *words):
         assert word in lines[0], lines[0]
 
 
+@pytest.mark.slow
 def test_demo_runs_every_stage_and_points_to_the_report(cli, tmp_path):
     code, out, err = cli("demo", "--out", tmp_path)
     assert code == 0

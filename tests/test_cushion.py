@@ -59,6 +59,7 @@ def test_adult_dimensions_and_256_control_points(designed):
     assert lo <= width <= hi
 
 
+@pytest.mark.slow
 def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     """... in place of an earlier design in the folder (its files that this one does not write are gone)."""
     out = tmp_path / "out"
