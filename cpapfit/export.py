@@ -3,16 +3,20 @@
 import io
 import re
 import zipfile
+from xml.etree import ElementTree
 
 import manifold3d
 import numpy as np
 import trimesh
 
 from .errors import CpapfitError
+from .rims import edge_uses
 
 
 WALL_TOLERANCE = 0.95  # the thinnest wall may fall this far short of the set thickness
 EDGE_CLEARANCE_MM = 1e-3  # a segment hitting a triangle nearer its edge than this passes through the edge (rounding), not the triangle
+ZERO_AREA_MM2 = 1e-10  # a triangle of less area is degenerate: float32 corners ~100 mm out resolve ~1e-5 mm
+STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attributes", "<u2")])
 
 
 class SolidError(CpapfitError):
@@ -89,6 +93,65 @@ def _edge_clearance(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     double_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
     opposite = np.linalg.norm(np.roll(triangles, -1, axis=1) - np.roll(triangles, 1, axis=1), axis=2)  # edge facing corner i
     return (bary * double_area[:, None] / np.maximum(opposite, 1e-300)).min(axis=1)
+
+
+def checked_stl(mesh: trimesh.Trimesh, name: str) -> bytes:
+    """`stl_bytes` of a part, once the file re-read as a slicer reads it passes `check_file`."""
+    data = stl_bytes(mesh)
+    check_file(read_stl(data), f"{name}.stl")
+    return data
+
+
+def checked_3mf(mesh: trimesh.Trimesh, name: str) -> bytes:
+    """`threemf_bytes` of a part, once the file re-read as a slicer reads it passes `check_file`."""
+    data = threemf_bytes(mesh, name)
+    check_file(read_3mf(data), f"{name}.3mf")
+    return data
+
+
+def check_file(mesh: trimesh.Trimesh, name: str) -> dict:
+    """A mesh file's triangles as re-read (`read_stl`, `read_3mf`) must form a closed 2-manifold:
+    every edge in exactly two triangles, no triangle under ZERO_AREA_MM2, and `check_closed`.
+    Returns the measured values; raises SolidError otherwise."""
+    found = {"edges_not_in_two_triangles": len(unpaired_edges(mesh)), "zero_area_triangles": int((mesh.area_faces < ZERO_AREA_MM2).sum())}
+    if found["edges_not_in_two_triangles"] or found["zero_area_triangles"]:
+        raise SolidError(f"{name} as written is not a closed 2-manifold ({found}); nothing was written", found)
+    return found | check_closed(mesh, name)
+
+
+def unpaired_edges(mesh: trimesh.Trimesh) -> np.ndarray:
+    """(K, 2) the edges of a mesh not in exactly two of its triangles (vertex indices)."""
+    edges, uses = edge_uses(mesh.faces)
+    return edges[uses != 2]
+
+
+def as_written(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A mesh as its STL file is read back (`read_stl`)."""
+    return read_stl(stl_bytes(mesh))
+
+
+def read_stl(data: bytes) -> trimesh.Trimesh:
+    """Binary STL bytes as a slicer reads them: each triangle's three float32 corners (mm), vertices
+    merged by exact position (no tolerance, no repair)."""
+    count = int.from_bytes(data[80:84], "little")
+    return merged(np.frombuffer(data, STL_RECORD, count, offset=84)["corners"].reshape(-1, 3, 3))
+
+
+def read_3mf(data: bytes) -> trimesh.Trimesh:
+    """The first object of 3MF bytes as a slicer reads it: vertices parsed to float32 (mm), each
+    triangle's corners by index, then vertices merged by exact position."""
+    with zipfile.ZipFile(io.BytesIO(data)) as z:
+        root = ElementTree.fromstring(z.read("3D/3dmodel.model"))
+    mesh = root.find(".//{*}mesh")
+    vertices = np.array([[v.get(k) for k in "xyz"] for v in mesh.iterfind(".//{*}vertex")], dtype=np.float32)
+    faces = np.array([[t.get(k) for k in ("v1", "v2", "v3")] for t in mesh.iterfind(".//{*}triangle")], dtype=np.int64)
+    return merged(vertices[faces])
+
+
+def merged(corners: np.ndarray) -> trimesh.Trimesh:
+    """(M, 3, 3) float32 triangle corners (mm) as a mesh whose vertices are the distinct positions."""
+    vertices, index = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    return trimesh.Trimesh(vertices.astype(np.float64), index.reshape(-1, 3), process=False)
 
 
 def stl_bytes(mesh: trimesh.Trimesh) -> bytes:

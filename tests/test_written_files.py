@@ -1,0 +1,54 @@
+"""Mesh files checked as a slicer reads them back: float32 corners, vertices merged by position."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from cpapfit.export import (SolidError, check_closed, check_file, checked_3mf, checked_stl, read_3mf, read_stl,
+                            stl_bytes, threemf_bytes)
+
+BOX = trimesh.creation.box((10.0, 10.0, 10.0))
+
+
+def with_edge_split(mesh: trimesh.Trimesh, share: float) -> trimesh.Trimesh:
+    """`mesh` with its first edge split at `share` of its length: a closed mesh, a T-junction nowhere."""
+    v0, v1 = mesh.edges_unique[0]
+    vertices = np.vstack([mesh.vertices, mesh.vertices[v0] + share * (mesh.vertices[v1] - mesh.vertices[v0])])
+    w, faces = len(mesh.vertices), []
+    for face in mesh.faces:
+        for k in range(3):
+            a, b, c = face[k], face[(k + 1) % 3], face[(k + 2) % 3]
+            if {a, b} == {v0, v1}:
+                faces += [[a, w, c], [w, b, c]]
+                break
+        else:
+            faces.append(face)
+    return trimesh.Trimesh(vertices, np.array(faces), process=False)
+
+
+def test_a_clean_solid_reads_back_as_written_from_stl_and_3mf():
+    stl, threemf = read_stl(stl_bytes(BOX)), read_3mf(threemf_bytes(BOX, "box"))
+    assert len(stl.faces) == len(threemf.faces) == 12 and len(stl.vertices) == len(threemf.vertices) == 8
+    assert np.array_equal(stl.vertices, threemf.vertices) and np.array_equal(stl.faces, threemf.faces)
+    assert check_file(stl, "box.stl")["edges_not_in_two_triangles"] == 0
+    assert checked_stl(BOX, "box") == stl_bytes(BOX) and checked_3mf(BOX, "box") == threemf_bytes(BOX, "box")
+
+
+def test_solids_touching_in_float32_pass_in_float64_but_not_as_written():
+    """Two cubes 1e-9 mm apart along an edge: apart in float64, one edge of four triangles in the file."""
+    other = BOX.copy().apply_translation((10.0 + 1e-9, 10.0 + 1e-9, 0.0))
+    pair = trimesh.util.concatenate([BOX, other])
+    assert check_closed(pair, "pair")["self_intersecting_edges"] == 0
+    with pytest.raises(SolidError) as refused:
+        checked_stl(pair, "pair")
+    assert refused.value.found["edges_not_in_two_triangles"] == 1 and "pair.stl" in str(refused.value)
+
+
+def test_a_vertex_rounding_onto_its_neighbour_leaves_zero_area_triangles():
+    """An edge split 1e-9 mm from its end: a closed solid in float64, two degenerate triangles in float32."""
+    split = with_edge_split(BOX, 1e-10)
+    assert split.is_watertight and split.area_faces.min() > 1e-10
+    with pytest.raises(SolidError) as refused:
+        checked_3mf(split, "split")
+    assert refused.value.found["zero_area_triangles"] == 2
+
