@@ -21,7 +21,7 @@ from .envelope import enveloped_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import StateFit, fit_states, sleep_states
-from .export import SolidError, check_closed, check_solid
+from .export import SolidError, check_solid
 from .mould import mould
 from .proportions import proportions
 from .quality import Quality, QualityParams, assess, require_quality
@@ -130,7 +130,7 @@ class Design:
     rim: RimGap  # the rim before its pressure-compensating pre-load, against the scan
     quality: Quality  # the scan's quality gates (none refuses: else no design)
     preload: Preload  # the rim set into the skin along the axis, along the seal curve
-    mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
+    mould_parts: dict  # {"mould_left" | "mould_right" | "mould_face" | "mould_core": trimesh.Trimesh}, checked as written (outputs.py)
     mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
     fits: dict  # {"custom" | "stock": CushionFit}: the custom cushion at its recommended force, the best stock size at its own
     fit_params: FitParams
@@ -196,7 +196,7 @@ def design(
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
     checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould")
-    moulded = checked_mould(cushion, solid)
+    moulded = mould(cushion, solid)
     fits = evaluate(face, {"custom": solid}, params, fit_params)
     states = fit_states({"custom": solid}, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
     compared = None
@@ -206,14 +206,6 @@ def design(
         fits, states = fits | compared.fits, compared.beside(states)
     return Design(al, reg, contact, cushion, solid, checks, rim, gates, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared)
-
-
-def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):
-    """Stage mould: the casting mould of a cushion, every part checked closed."""
-    moulded = mould(cushion, solid)
-    for name, part in moulded.parts.items():
-        check_closed(part, name)
-    return moulded
 
 
 def _checked(solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str, landmarks_path: str) -> dict:

@@ -52,3 +52,11 @@ def test_a_vertex_rounding_onto_its_neighbour_leaves_zero_area_triangles():
         checked_3mf(split, "split")
     assert refused.value.found["zero_area_triangles"] == 2
 
+
+def test_designed_files_are_clean_as_written(designed):
+    """Every part of a design, as its STL (and the cushion's 3MF) reads back: no vertex merged away, closed."""
+    _, d = designed
+    for name, part in {"cushion": d.solid, **d.mould_parts}.items():
+        back = read_stl(checked_stl(part, name))
+        assert len(back.faces) == len(part.faces) and len(back.vertices) == len(part.vertices), name
+    assert check_file(read_3mf(checked_3mf(d.solid, "cushion")), "cushion.3mf")["volume_mm3"] == pytest.approx(d.solid.volume, rel=1e-5)
