@@ -26,7 +26,7 @@ from trimesh.ray.ray_util import contains_points
 from .cushion.nurbs import Cushion
 from .cushion.solid import sheet_faces
 from .draft import Draft, draft
-from .export import to_manifold, to_trimesh
+from .export import as_written, to_manifold, to_trimesh, unpaired_edges
 from .parting import AWAY_MM, GRID_MM, between, under
 
 MARGIN_MM = 8.0  # mould wall around the cushion
@@ -34,7 +34,9 @@ SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
 PRINT_MM = 4.0  # the core reaches this far past each of the cushion's openings: no face of it lies in the plane of the cushion's end
 CHANNEL_DIP_MM = 0.5  # channels start this far inside the cavity: none of their faces lies in the plane of the cushion's end
 KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
-WELD_MM = 1e-4  # a part's vertices closer than this are merged (manifold3d simplify): none may coincide in float32
+WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
+PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
+SLIVER_MM3 = 0.1  # a piece of a mould part smaller than this is a boolean's sliver, not material
 PROBE_MM = 0.01  # a part's face touches the cast when the cast is this far off it
 PROBE_RAYS = np.array([[0.4395, 0.6176, 0.6522], [-0.7071, 0.5, 0.5], [0.2673, -0.5345, 0.8018]])  # fixed: no random retries
 
@@ -80,7 +82,7 @@ def mould(cushion: Cushion, solid: trimesh.Trimesh, n_u: int = 128, n_v: int = 2
     for k, diameter in ((0, SPOUT_MM), (n_u // 4, VENT_MM), (n_u // 2, VENT_MM), (3 * n_u // 4, VENT_MM)):
         outer = outer - _channel(ring[k], hi[2], diameter, frame)
     parts = _outer_parts(outer, to_trimesh(filled), frame, lo, hi) | {"mould_core": filled - cushion_m}
-    parts = {name: _welded(part) for name, part in parts.items()}
+    parts = {name: _clean_as_written(part) for name, part in parts.items()}
     return Mould(parts, demoulding(parts, solid, side, axis))
 
 
@@ -124,10 +126,25 @@ def _touching_most(piece: trimesh.Trimesh, others: dict) -> str | None:
     return best if touching[best] else None
 
 
-def _welded(part: m3.Manifold) -> trimesh.Trimesh:
-    """A part with its vertices rounded to float32, as its file holds them, and those within WELD_MM
-    merged (manifold3d): two vertices a float64 boolean kept apart do not land on one in the file."""
-    return to_trimesh(to_manifold(to_trimesh(part)).simplify(WELD_MM))
+def _clean_as_written(part: m3.Manifold) -> trimesh.Trimesh:
+    """A part made clean as its float32 file reads back (`export.check_file`): `_welded`; where two
+    of its sheets still touch (an edge of the file in four triangles), a bar PINCH_MM across cut out
+    along that edge and the part welded again."""
+    welded = _welded(part)
+    written = as_written(to_trimesh(welded))
+    pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
+    corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    for ends in pinches:
+        welded = welded - m3.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
+    return to_trimesh(_welded(welded) if len(pinches) else welded)
+
+
+def _welded(part: m3.Manifold) -> m3.Manifold:
+    """A part with its vertices rounded to float32, as its file holds them, and those then within
+    WELD_MM (those that coincide) merged (manifold3d), dropping the slivers this parts from it
+    (under SLIVER_MM3)."""
+    welded = to_manifold(to_trimesh(part)).simplify(WELD_MM)
+    return m3.Manifold.compose([body for body in welded.decompose() if body.volume() >= SLIVER_MM3])
 
 
 def _to_scan(frame: np.ndarray) -> np.ndarray:

@@ -19,6 +19,7 @@ from .frozen import freeze_arrays
 GRID_MM = 1.0  # grid step of a parting surface
 AWAY_MM = 1.5  # a part absent from a column: its surface this far below the region
 TAKE_DEG = 15.0  # a part pulled from beneath the cast takes its underside only where that faces the pull this steeply (shallower: the halves do)
+SMOOTHING = 2.0  # grid steps: the halves' parting surface smoothed (a Gaussian), within the middle half of the cast along each ray
 OPENING = 2  # grid steps: a part taking the cast's underside takes no strip narrower than twice this, and no part of it is ringed by other parts
 
 
@@ -69,9 +70,10 @@ def between(cast: trimesh.Trimesh, basis: np.ndarray, lo: np.ndarray, hi: np.nda
     b, c, ray, tri, t = _hits(cast, basis, lo, hi)
     first, last = _extremes(ray, t, (len(b), len(c)))
     met = np.isfinite(first)
-    nearest = ndimage.distance_transform_edt(~met, return_distances=False, return_indices=True)
-    middle = (np.where(met, first, 0.0) + np.where(met, last, 0.0)) / 2
-    return HeightField(basis, b, c, middle[tuple(nearest)])
+    nearest = tuple(ndimage.distance_transform_edt(~met, return_distances=False, return_indices=True))
+    first, last = first[nearest], last[nearest]
+    smooth = ndimage.gaussian_filter((first + last) / 2, SMOOTHING)
+    return HeightField(basis, b, c, np.clip(smooth, first + (last - first) / 4, last - (last - first) / 4))
 
 
 def under(cast: trimesh.Trimesh, basis: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> HeightField:
