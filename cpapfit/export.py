@@ -95,18 +95,19 @@ def _edge_clearance(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     return (bary * double_area[:, None] / np.maximum(opposite, 1e-300)).min(axis=1)
 
 
-def checked_stl(mesh: trimesh.Trimesh, name: str) -> bytes:
-    """`stl_bytes` of a part, once the file re-read as a slicer reads it passes `check_file`."""
-    data = stl_bytes(mesh)
-    check_file(read_stl(data), f"{name}.stl")
-    return data
-
-
-def checked_3mf(mesh: trimesh.Trimesh, name: str) -> bytes:
-    """`threemf_bytes` of a part, once the file re-read as a slicer reads it passes `check_file`."""
-    data = threemf_bytes(mesh, name)
-    check_file(read_3mf(data), f"{name}.3mf")
-    return data
+def checked_files(mesh: trimesh.Trimesh, name: str, formats: tuple[str, ...] = ("stl",)) -> dict[str, bytes]:
+    """{"NAME.stl" | "NAME.3mf": bytes} of a part in each of `formats`, once each file read back as a
+    slicer reads it (`read_stl`, `read_3mf`) passes `check_file`; a file that reads back to the same
+    vertices and triangles as one already checked passes with it."""
+    files, passed = {}, []
+    for kind in formats:
+        data = stl_bytes(mesh) if kind == "stl" else threemf_bytes(mesh, name)
+        back = read_stl(data) if kind == "stl" else read_3mf(data)
+        if not any(np.array_equal(back.vertices, p.vertices) and np.array_equal(back.faces, p.faces) for p in passed):
+            check_file(back, f"{name}.{kind}")
+            passed.append(back)
+        files[f"{name}.{kind}"] = data
+    return files
 
 
 def check_file(mesh: trimesh.Trimesh, name: str) -> dict:

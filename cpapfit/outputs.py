@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .align.nonrigid import Registration
-from .export import checked_3mf, checked_stl
+from .export import checked_files
 from .io.write import json_bytes, ply_bytes
 from .pipeline import Design
 from .records import contact_curve_record, design_record
@@ -31,12 +31,13 @@ def registration_ply(reg: Registration) -> bytes:
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}; every solid's STL and 3MF
     checked as a slicer reads it back (`export.check_file`: else SolidError, nothing written)."""
+    meshes = checked_files(d.solid, "cushion", ("stl", "3mf"))
+    for name, part in d.mould_parts.items():
+        meshes |= checked_files(part, name)
     return {
         "registered_template.ply": registration_ply(d.registration),
         "contact_curve.json": json_bytes(contact_curve_record(d)),
-        "cushion.stl": checked_stl(d.solid, "cushion"),
-        "cushion.3mf": checked_3mf(d.solid, "cushion"),
-        **{f"{name}.stl": checked_stl(part, name) for name, part in d.mould_parts.items()},
+        **meshes,
         "fit.json": json_bytes(design_record(d, scan)),
     }
 

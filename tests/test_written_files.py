@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.export import (SolidError, check_closed, check_file, checked_3mf, checked_stl, read_3mf, read_stl,
-                            stl_bytes, threemf_bytes)
+from cpapfit.export import SolidError, check_closed, check_file, checked_files, read_3mf, read_stl, stl_bytes, threemf_bytes
 
 BOX = trimesh.creation.box((10.0, 10.0, 10.0))
 
@@ -31,7 +30,7 @@ def test_a_clean_solid_reads_back_as_written_from_stl_and_3mf():
     assert len(stl.faces) == len(threemf.faces) == 12 and len(stl.vertices) == len(threemf.vertices) == 8
     assert np.array_equal(stl.vertices, threemf.vertices) and np.array_equal(stl.faces, threemf.faces)
     assert check_file(stl, "box.stl")["edges_not_in_two_triangles"] == 0
-    assert checked_stl(BOX, "box") == stl_bytes(BOX) and checked_3mf(BOX, "box") == threemf_bytes(BOX, "box")
+    assert checked_files(BOX, "box", ("stl", "3mf")) == {"box.stl": stl_bytes(BOX), "box.3mf": threemf_bytes(BOX, "box")}
 
 
 def test_solids_touching_in_float32_pass_in_float64_but_not_as_written():
@@ -40,7 +39,7 @@ def test_solids_touching_in_float32_pass_in_float64_but_not_as_written():
     pair = trimesh.util.concatenate([BOX, other])
     assert check_closed(pair, "pair")["self_intersecting_edges"] == 0
     with pytest.raises(SolidError) as refused:
-        checked_stl(pair, "pair")
+        checked_files(pair, "pair")
     assert refused.value.found["edges_not_in_two_triangles"] == 1 and "pair.stl" in str(refused.value)
 
 
@@ -49,7 +48,7 @@ def test_a_vertex_rounding_onto_its_neighbour_leaves_zero_area_triangles():
     split = with_edge_split(BOX, 1e-10)
     assert split.is_watertight and split.area_faces.min() > 1e-10
     with pytest.raises(SolidError) as refused:
-        checked_3mf(split, "split")
+        checked_files(split, "split", ("3mf",))
     assert refused.value.found["zero_area_triangles"] == 2
 
 
@@ -57,9 +56,10 @@ def test_designed_files_are_clean_as_written(designed):
     """Every part of a design, as its STL (and the cushion's 3MF) reads back: no vertex merged away, closed."""
     _, d = designed
     for name, part in {"cushion": d.solid, **d.mould_parts}.items():
-        back = read_stl(checked_stl(part, name))
+        back = read_stl(checked_files(part, name)[f"{name}.stl"])
         assert len(back.faces) == len(part.faces) and len(back.vertices) == len(part.vertices), name
-    assert check_file(read_3mf(checked_3mf(d.solid, "cushion")), "cushion.3mf")["volume_mm3"] == pytest.approx(d.solid.volume, rel=1e-5)
+    threemf = checked_files(d.solid, "cushion", ("3mf",))["cushion.3mf"]
+    assert check_file(read_3mf(threemf), "cushion.3mf")["volume_mm3"] == pytest.approx(d.solid.volume, rel=1e-5)
 
 
 def test_sheets_touching_along_an_edge_are_parted_before_writing():
@@ -72,7 +72,7 @@ def test_sheets_touching_along_an_edge_are_parted_before_writing():
     cube = manifold3d.Manifold.cube([10.0, 10.0, 10.0])
     pair = manifold3d.Manifold.compose([cube, cube.translate([10.0, 10.0, 0.0])])
     with pytest.raises(SolidError):
-        checked_stl(trimesh.Trimesh(pair.to_mesh().vert_properties, pair.to_mesh().tri_verts), "pair")
+        checked_files(trimesh.Trimesh(pair.to_mesh().vert_properties, pair.to_mesh().tri_verts), "pair")
     parted = _clean_as_written(pair)
-    assert check_file(read_stl(checked_stl(parted, "pair")), "pair.stl")["edges_not_in_two_triangles"] == 0
+    assert check_file(read_stl(checked_files(parted, "pair")["pair.stl"]), "pair.stl")["edges_not_in_two_triangles"] == 0
     assert parted.volume == pytest.approx(2000.0, rel=1e-3)
