@@ -4,7 +4,7 @@ The cushion's sheet carried on a little past its two openings (the core's prints
 the outer mould) and capped there, united with the cushion, is the "plug". The core is the plug
 minus the cushion (it fills the tube's opening). The outer mould is a block
 around the plug minus the plug, in three parts (`parting.py`): a face plate pulled along the mask
-axis towards the face, taking the cushion's underside where that faces it with draft, and two
+axis towards the face, taking the cushion's underside where that faces it steeply, and two
 halves pulled apart across the head, split by a parting surface through the cushion's silhouette
 as seen from the side, so that each takes the surface it sees. A pour spout and vents run from
 the block's top (the frame side) into the cavity, and two keys (bumps on one half, sockets with

@@ -5,7 +5,7 @@ SCHEMA_VERSION; the JSON Schema of each file is `cpapfit/schemas/<name>.schema.j
 import numpy as np
 
 from . import __version__
-from .draft import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG
+from .draft import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG, Draft
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
@@ -37,12 +37,13 @@ def mould_record(drafts: dict) -> dict:
     }
 
 
-def _left(d) -> str:
+def _left(d: Draft) -> str:
     """What a mould part's draft leaves to the silicone, in words."""
+    shares = (f"{d.undercut_fraction:.1%} of its moulding area undercut (down to {d.min_draft_deg:.0f} deg), "
+              f"{d.below_min_fraction:.1%} under {MIN_DRAFT_DEG:g} deg")
     if d.meets_target:
-        return "nothing beyond the target"
-    return (f"{d.undercut_fraction:.0%} of its moulding area is undercut (down to {d.min_draft_deg:.0f} deg) and "
-            f"{d.below_min_fraction:.0%} has under {MIN_DRAFT_DEG:g} deg: it comes out only as the cured silicone flexes and stretches off it")
+        return f"within the target: {shares}"
+    return f"{shares}: it comes out only as the cured silicone flexes and stretches off it"
 
 
 def evaluation_record(fits: dict, params: FitParams) -> dict:
