@@ -220,7 +220,7 @@ def cmd_demo(args) -> int:
     summaries["nonrigid"] = registration_summary(d.registration)
     summaries["contact"] = f"seal curve of {len(d.contact.curve)} points, {100 * d.contact.on_scan.mean():.0f} % on the scan"
     summaries["cushion"] = design_summary(fit)
-    summaries["export"] = f"{len(run.files)} files in {out / 'design'}: cushion STL and 3MF, mould halves and core (STL), PLY, JSON"
+    summaries["export"] = f"{len(run.files)} files in {out / 'design'}: cushion STL and 3MF, mould halves, face plate and core (STL), PLY, JSON"
     summaries["evaluate"] = fit_summary(fit)
     summaries["report"] = f"report.html and {sum(name.endswith('.png') for name in run.files)} pictures in {out / 'design'}"
     for stage, summary in summaries.items():  # in the pipeline's order

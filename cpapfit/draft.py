@@ -3,8 +3,9 @@
 A triangle of the moulding surface (outward normal n, pointing from the part into the cast) has
 draft asin(-n . pull): positive where the part comes away from the cast as it moves, 0 on a wall
 parallel to the pull (it scrapes along the cast), negative where the part would have to move
-through the cast (an undercut). Casters want at least ~1 degree on rigid parts; a silicone cast
-flexes, so undercuts are flagged and measured here, not removed.
+through the cast (an undercut). Casters want at least ~1 degree on rigid parts: a part meets the
+target when at most MAX_UNDERCUT of its moulding area is undercut and at most MAX_BELOW_MIN has
+less than MIN_DRAFT_DEG; where a part does not, the silicone has to flex out.
 """
 
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ import numpy as np
 
 MIN_DRAFT_DEG = 1.0  # less draft than this is flagged
 UNDERCUT_DEG = -0.1  # below this a face locks against the pull (a small tolerance for flat walls' rounding)
+MAX_UNDERCUT, MAX_BELOW_MIN = 0.05, 0.05  # the target: fractions of a part's moulding area
 
 
 @dataclass(frozen=True)
@@ -28,12 +30,17 @@ class Draft:
     undercut_fraction: float
     min_draft_deg: float
 
+    @property
+    def meets_target(self) -> bool:
+        """At most MAX_UNDERCUT of the moulding area undercut and at most MAX_BELOW_MIN under MIN_DRAFT_DEG."""
+        return self.undercut_fraction <= MAX_UNDERCUT and self.below_min_fraction <= MAX_BELOW_MIN
+
     def record(self) -> dict:
         """The fit.json entry."""
         return {
             "pull": self.pull_name, "pull_direction": np.round(self.pull, 4).tolist(), "moulding_area_mm2": round(self.area_mm2, 1),
             "draft_below_1deg_fraction": round(self.below_min_fraction, 4), "undercut_fraction": round(self.undercut_fraction, 4),
-            "min_draft_deg": round(self.min_draft_deg, 2),
+            "min_draft_deg": round(self.min_draft_deg, 2), "meets_target": self.meets_target,
         }
 
 

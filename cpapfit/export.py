@@ -3,16 +3,20 @@
 import io
 import re
 import zipfile
+from xml.etree import ElementTree
 
 import manifold3d
 import numpy as np
 import trimesh
 
 from .errors import CpapfitError
+from .rims import edge_uses
 
 
 WALL_TOLERANCE = 0.95  # the thinnest wall may fall this far short of the set thickness
 EDGE_CLEARANCE_MM = 1e-3  # a segment hitting a triangle nearer its edge than this passes through the edge (rounding), not the triangle
+ZERO_AREA_MM2 = 1e-10  # a triangle of less area is degenerate: float32 corners ~100 mm out resolve ~1e-5 mm
+STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attributes", "<u2")])
 
 
 class SolidError(CpapfitError):
@@ -89,6 +93,84 @@ def _edge_clearance(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     double_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
     opposite = np.linalg.norm(np.roll(triangles, -1, axis=1) - np.roll(triangles, 1, axis=1), axis=2)  # edge facing corner i
     return (bary * double_area[:, None] / np.maximum(opposite, 1e-300)).min(axis=1)
+
+
+def checked_files(mesh: trimesh.Trimesh, name: str, formats: tuple[str, ...] = ("stl",), passed: list | None = None) -> dict[str, bytes]:
+    """{"NAME.stl" | "NAME.3mf": bytes} of a part in each of `formats`, once each file read back as a
+    slicer reads it (`read_stl`, `read_3mf_parts`) passes `check_file`; a file that reads back to the
+    same vertices and triangles as one in `passed` (the meshes checked so far, added to) passes with it."""
+    passed = [] if passed is None else passed
+    files = {}
+    for kind in formats:
+        data = stl_bytes(mesh) if kind == "stl" else threemf_bytes(mesh, name)
+        (back,) = [read_stl(data)] if kind == "stl" else read_3mf_parts(data)
+        _check_once(back, f"{name}.{kind}", passed)
+        files[f"{name}.{kind}"] = data
+    return files
+
+
+def checked_assembly(parts: dict[str, trimesh.Trimesh], name: str, passed: list | None = None) -> dict[str, bytes]:
+    """{"NAME.3mf": bytes} of {part name: solid}, each where it lies, once every part read back as a
+    slicer reads it passes `check_file` (`checked_files`' `passed`)."""
+    passed = [] if passed is None else passed
+    data = assembly_3mf_bytes(parts)
+    for part, back in zip(parts, read_3mf_parts(data), strict=True):
+        _check_once(back, f"{name}.3mf ({part})", passed)
+    return {f"{name}.3mf": data}
+
+
+def _check_once(back: trimesh.Trimesh, label: str, passed: list) -> None:
+    """`check_file` of a mesh read back, unless one with the same vertices and triangles is in `passed`."""
+    if not any(np.array_equal(back.vertices, p.vertices) and np.array_equal(back.faces, p.faces) for p in passed):
+        check_file(back, label)
+        passed.append(back)
+
+
+def check_file(mesh: trimesh.Trimesh, name: str) -> dict:
+    """A mesh file's triangles as re-read (`read_stl`, `read_3mf_parts`) must form a closed 2-manifold:
+    every edge in exactly two triangles, no triangle under ZERO_AREA_MM2, and `check_closed`.
+    Returns the measured values; raises SolidError otherwise."""
+    found = {"edges_not_in_two_triangles": len(unpaired_edges(mesh)), "zero_area_triangles": int((mesh.area_faces < ZERO_AREA_MM2).sum())}
+    if found["edges_not_in_two_triangles"] or found["zero_area_triangles"]:
+        raise SolidError(f"{name} as written is not a closed 2-manifold ({found}); nothing was written", found)
+    return found | check_closed(mesh, name)
+
+
+def unpaired_edges(mesh: trimesh.Trimesh) -> np.ndarray:
+    """(K, 2) the edges of a mesh not in exactly two of its triangles (vertex indices)."""
+    edges, uses = edge_uses(mesh.faces)
+    return edges[uses != 2]
+
+
+def as_written(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """A mesh as its STL file is read back (`read_stl`)."""
+    return read_stl(stl_bytes(mesh))
+
+
+def read_stl(data: bytes) -> trimesh.Trimesh:
+    """Binary STL bytes as a slicer reads them: each triangle's three float32 corners (mm), vertices
+    merged by exact position (no tolerance, no repair)."""
+    count = int.from_bytes(data[80:84], "little")
+    return merged(np.frombuffer(data, STL_RECORD, count, offset=84)["corners"].reshape(-1, 3, 3))
+
+
+def read_3mf_parts(data: bytes) -> list[trimesh.Trimesh]:
+    """Each object of 3MF bytes as a slicer reads it: vertices parsed to float32 (mm), each
+    triangle's corners by index, then vertices merged by exact position."""
+    with zipfile.ZipFile(io.BytesIO(data)) as z:
+        root = ElementTree.fromstring(z.read("3D/3dmodel.model"))
+    parts = []
+    for mesh in root.iterfind(".//{*}mesh"):
+        vertices = np.array([[v.get(k) for k in "xyz"] for v in mesh.iterfind(".//{*}vertex")], dtype=np.float32)
+        faces = np.array([[t.get(k) for k in ("v1", "v2", "v3")] for t in mesh.iterfind(".//{*}triangle")], dtype=np.int64)
+        parts.append(merged(vertices[faces]))
+    return parts
+
+
+def merged(corners: np.ndarray) -> trimesh.Trimesh:
+    """(M, 3, 3) float32 triangle corners (mm) as a mesh whose vertices are the distinct positions."""
+    vertices, index = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    return trimesh.Trimesh(vertices.astype(np.float64), index.reshape(-1, 3), process=False)
 
 
 def stl_bytes(mesh: trimesh.Trimesh) -> bytes:

@@ -1,16 +1,19 @@
-"""A two-part casting mould with a core for a silicone cushion (booleans with manifold3d).
+"""A casting mould for a silicone cushion: three outer parts and a core (booleans with manifold3d).
 
-The cushion's sheet with its two openings capped, united with the cushion, is the "plug". The
-core is the plug minus the cushion (it fills the tube's opening); the outer mould is a block around the plug
-minus the plug, split in two along the plane through the mask axis and the head's up direction
-so that each half comes off sideways. A pour spout and vents run from the block's top (the
-frame side) into the cavity, and two keys on the parting face (bumps on one half, sockets with
+The cushion's sheet carried on a little past its two openings (the core's prints, which seat it in
+the outer mould) and capped there, united with the cushion, is the "plug". The core is the plug
+minus the cushion (it fills the tube's opening). The outer mould is a block
+around the plug minus the plug, in three parts (`parting.py`): a face plate pulled along the mask
+axis towards the face, taking the cushion's underside where that faces it steeply, and two
+halves pulled apart across the head, split by a parting surface through the cushion's silhouette
+as seen from the side, so that each takes the surface it sees. A pour spout and vents run from
+the block's top (the frame side) into the cavity, and two keys (bumps on one half, sockets with
 clearance on the other) register the halves.
 
-Demoulding (`draft.py`): each half is pulled straight off the parting plane, the core out along the
-mask axis through whichever opening leaves less undercut; the draft of each part's moulding surface
-(its faces that touch the cushion) is measured, not corrected: undercuts are reported for the
-caster, and demoulding relies on the cured silicone flexing out of them.
+Demoulding (`draft.py`): the draft of each part's moulding surface (its faces that touch the
+cushion) along its pull is measured; the core is drawn along the mask axis through whichever
+opening leaves less undercut. What is left undercut is reported for the caster: demoulding there
+relies on the cured silicone flexing.
 """
 
 from dataclasses import dataclass
@@ -23,26 +26,34 @@ from trimesh.ray.ray_util import contains_points
 from .cushion.nurbs import Cushion
 from .cushion.solid import sheet_faces
 from .draft import Draft, draft
-from .export import to_manifold, to_trimesh
+from .export import as_written, to_manifold, to_trimesh, unpaired_edges
+from .parting import AWAY_MM, GRID_MM, between, under
 
 MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
+PRINT_MM = 4.0  # the core reaches this far past each of the cushion's openings: no face of it lies in the plane of the cushion's end
+CHANNEL_DIP_MM = 0.5  # channels start this far inside the cavity: none of their faces lies in the plane of the cushion's end
 KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
+WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
+PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
+SLIVER_MM3 = 0.1  # a piece of a mould part smaller than this is a boolean's sliver, not material
 PROBE_MM = 0.01  # a part's face touches the cast when the cast is this far off it
 PROBE_RAYS = np.array([[0.4395, 0.6176, 0.6522], [-0.7071, 0.5, 0.5], [0.2673, -0.5345, 0.8018]])  # fixed: no random retries
 
 
 @dataclass(frozen=True)
 class Mould:
-    """The mould parts as trimesh solids: {"mould_left", "mould_right", "mould_core"}, and the draft
-    of each one's moulding surface along its pull direction (same keys)."""
+    """The mould parts as trimesh solids: {"mould_left", "mould_right", "mould_face", "mould_core"},
+    and the draft of each one's moulding surface along its pull direction (same keys)."""
 
     parts: dict
     draft: dict
 
 
-def plug(grid: np.ndarray) -> trimesh.Trimesh:
-    """The solid inside the cushion's sheet (an (n_u, n_v, 3) grid), both openings capped by fans."""
+def plug(grid: np.ndarray, axis: np.ndarray) -> trimesh.Trimesh:
+    """The solid inside the cushion's sheet (an (n_u, n_v, 3) grid, mm), carried on PRINT_MM past
+    both openings along the mask `axis` (unit) and capped there by fans."""
+    grid = np.concatenate([grid[:, :1] - PRINT_MM * axis, grid, grid[:, -1:] + PRINT_MM * axis], axis=1)
     n_u, n_v, _ = grid.shape
     pts = grid.reshape(-1, 3)
     rim_c, ring_c = grid[:, 0].mean(axis=0), grid[:, -1].mean(axis=0)
@@ -63,36 +74,91 @@ def mould(cushion: Cushion, solid: trimesh.Trimesh, n_u: int = 128, n_v: int = 2
     side = np.cross(up, axis)
     frame = np.stack([side, up, axis])  # rows: the mould's x, y, z in scan coordinates
     cushion_m = to_manifold(solid)
-    filled = to_manifold(plug(cushion.grid(n_u, n_v))) + cushion_m  # the union: the cushion is wholly inside
-    core = filled - cushion_m
+    filled = to_manifold(plug(cushion.grid(n_u, n_v), axis)) + cushion_m  # the union: the cushion is wholly inside
     local = solid.vertices @ frame.T
     lo, hi = local.min(axis=0) - MARGIN_MM, local.max(axis=0) + MARGIN_MM
-    to_scan = np.eye(4)
-    to_scan[:3, :3] = frame.T
-    block = m3.Manifold.cube(hi - lo).translate(lo).transform(to_scan[:3])
-    outer = block - filled
-    top = hi[2]
-    centre = (lo + hi) / 2
-    ring_local = cushion.grid(n_u, n_v)[:, -1] @ frame.T
-    channels = [_channel(ring_local[0], top, SPOUT_MM, to_scan)] + [
-        _channel(ring_local[k], top, VENT_MM, to_scan) for k in (n_u // 4, n_u // 2, 3 * n_u // 4)
-    ]
-    for ch in channels:
-        outer = outer - ch
-    left, right = outer.split_by_plane(side.tolist(), float(side @ (frame.T @ centre)))
-    for y in (lo[1] + MARGIN_MM / 2, hi[1] - MARGIN_MM / 2):  # in the mould wall's corners, clear of the plug
-        at = frame.T @ np.array([centre[0], y, lo[2] + MARGIN_MM / 2])
-        key = m3.Manifold.sphere(KEY_MM, 32).translate(at)
-        left, right = left + key, right - m3.Manifold.sphere(KEY_MM + KEY_CLEARANCE_MM, 32).translate(at)
-    parts = {"mould_left": to_trimesh(left), "mould_right": to_trimesh(right), "mould_core": to_trimesh(core)}
+    outer = m3.Manifold.cube(hi - lo).translate(lo).transform(_to_scan(frame)) - filled
+    ring = cushion.grid(n_u, n_v)[:, -1] @ frame.T
+    for k, diameter in ((0, SPOUT_MM), (n_u // 4, VENT_MM), (n_u // 2, VENT_MM), (3 * n_u // 4, VENT_MM)):
+        outer = outer - _channel(ring[k], hi[2], diameter, frame)
+    parts = _outer_parts(outer, to_trimesh(filled), frame, lo, hi) | {"mould_core": filled - cushion_m}
+    parts = {name: _clean_as_written(part) for name, part in parts.items()}
     return Mould(parts, demoulding(parts, solid, side, axis))
 
 
+def _outer_parts(outer: m3.Manifold, filled: trimesh.Trimesh, frame: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> dict:
+    """The outer mould in its parts {"mould_left", "mould_right", "mould_face"} (`frame`: rows side,
+    up, axis; `lo`, `hi`: the block's corners along them, mm), the halves keyed, each in one piece
+    (`_joined_pieces`). The face plate's grid is offset a quarter step from the halves' so that no
+    grid lines of the two parting surfaces coincide."""
+    along = [2, 0, 1]  # the face plate's frame: axis, side, up
+    above = to_manifold(under(filled, frame[along], lo[along] - GRID_MM / 4, hi[along]).solid(hi[2] + AWAY_MM))
+    rest = outer ^ above
+    parting = between(filled, frame, lo, hi)
+    left_side = to_manifold(parting.solid(hi[0] + AWAY_MM))
+    left, right = rest ^ left_side, rest - left_side
+    for y in (lo[1] + MARGIN_MM / 2, hi[1] - MARGIN_MM / 2):  # in the mould wall's corners, clear of the plug
+        at = parting.point(y, lo[2] + MARGIN_MM / 2)
+        left = left + m3.Manifold.sphere(KEY_MM, 32).translate(at)
+        right = right - m3.Manifold.sphere(KEY_MM + KEY_CLEARANCE_MM, 32).translate(at)
+    return _joined_pieces({"mould_left": left, "mould_right": right, "mould_face": outer - above})
+
+
+def _joined_pieces(parts: dict) -> dict:
+    """The outer parts (manifold3d) with every piece cut off from a part's largest body (the parting
+    surfaces can isolate one between the cast and the other parts) joined to the other part its
+    faces touch most (kept where they touch none)."""
+    meshes = {name: to_trimesh(part) for name, part in parts.items()}
+    joined = {}
+    for name, part in parts.items():
+        bodies = sorted(part.decompose(), key=lambda body: body.volume())
+        joined.setdefault(name, []).append(bodies[-1])
+        for piece in bodies[:-1]:
+            joined.setdefault(_touching_most(to_trimesh(piece), {k: v for k, v in meshes.items() if k != name}) or name, []).append(piece)
+    return {name: m3.Manifold.batch_boolean(joined[name], m3.OpType.Add) for name in parts}
+
+
+def _touching_most(piece: trimesh.Trimesh, others: dict) -> str | None:
+    """The name of the mesh in `others` that most of `piece`'s faces touch (PROBE_MM off them), or None."""
+    probe = piece.triangles_center + PROBE_MM * piece.face_normals
+    touching = {name: contains_points(mesh.ray, probe, check_direction=PROBE_RAYS[0]).sum() for name, mesh in others.items()}
+    best = max(touching, key=touching.get)
+    return best if touching[best] else None
+
+
+def _clean_as_written(part: m3.Manifold) -> trimesh.Trimesh:
+    """A part made clean as its float32 file reads back (`export.check_file`): `_welded`; where two
+    of its sheets still touch (an edge of the file in four triangles), a bar PINCH_MM across cut out
+    along that edge and the part welded again."""
+    welded = _welded(part)
+    written = as_written(to_trimesh(welded))
+    pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
+    corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    for ends in pinches:
+        welded = welded - m3.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
+    return to_trimesh(_welded(welded) if len(pinches) else welded)
+
+
+def _welded(part: m3.Manifold) -> m3.Manifold:
+    """A part with its vertices rounded to float32, as its file holds them, and those then within
+    WELD_MM (those that coincide) merged (manifold3d), dropping the slivers this parts from it
+    (under SLIVER_MM3)."""
+    welded = to_manifold(to_trimesh(part)).simplify(WELD_MM)
+    return m3.Manifold.compose([body for body in welded.decompose() if body.volume() >= SLIVER_MM3])
+
+
+def _to_scan(frame: np.ndarray) -> np.ndarray:
+    """(3, 4) the affine map of the mould's frame (rows of `frame`) to scan coordinates."""
+    return np.hstack([frame.T, np.zeros((3, 1))])
+
+
 def demoulding(parts: dict, cast: trimesh.Trimesh, side: np.ndarray, axis: np.ndarray) -> dict:
-    """{part name: Draft}: the halves pulled off the parting plane (normal `side`, towards the left
-    half), the core along the mask `axis` out through whichever opening leaves less undercut."""
-    pulls = {"mould_left": ((side, "off the parting plane, towards the patient's left"),),
-             "mould_right": ((-side, "off the parting plane, towards the patient's right"),),
+    """{part name: Draft}: the halves pulled apart across the head (`side`, towards the left half),
+    the face plate along the mask `axis` towards the face, the core along the axis out through
+    whichever opening leaves less undercut."""
+    pulls = {"mould_left": ((side, "across the head, towards the patient's left"),),
+             "mould_right": ((-side, "across the head, towards the patient's right"),),
+             "mould_face": ((-axis, "along the mask axis, towards the face"),),
              "mould_core": ((axis, "along the mask axis, out through the frame opening"),
                             (-axis, "along the mask axis, out through the face opening"))}
     return {name: _least_undercut(part, moulding_faces(part, cast), pulls[name]) for name, part in parts.items()}
@@ -114,8 +180,9 @@ def _least_undercut(part: trimesh.Trimesh, faces: np.ndarray, pulls: tuple) -> D
     return min((draft(part.vertices, faces, pull, name) for pull, name in pulls), key=lambda d: d.undercut_fraction)
 
 
-def _channel(start_local: np.ndarray, top: float, diameter: float, to_scan: np.ndarray) -> m3.Manifold:
-    """A vertical cylinder (along the mask axis) from a point of the cavity to the block's top."""
-    height = top - start_local[2] + 1.0
-    cyl = m3.Manifold.cylinder(height, diameter / 2, diameter / 2, 32)
-    return cyl.translate(start_local.tolist()).transform(to_scan[:3])
+def _channel(start: np.ndarray, top: float, diameter: float, frame: np.ndarray) -> m3.Manifold:
+    """A cylinder along the mask axis from CHANNEL_DIP_MM inside the cavity below `start` (a point of
+    the cushion's frame end, mould frame) to past the block's top `top`, in scan coordinates."""
+    bottom = start - [0.0, 0.0, CHANNEL_DIP_MM]
+    cylinder = m3.Manifold.cylinder(top - bottom[2] + 1.0, diameter / 2, diameter / 2, 32)
+    return cylinder.translate(bottom.tolist()).transform(_to_scan(frame))

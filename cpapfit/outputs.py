@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .align.nonrigid import Registration
-from .export import assembly_3mf_bytes, stl_bytes, threemf_bytes
+from .export import checked_assembly, checked_files
 from .io.write import json_bytes, ply_bytes
 from .pipeline import Design
 from .records import contact_curve_record, design_record, mask_record
@@ -29,15 +29,18 @@ def registration_ply(reg: Registration) -> bytes:
 
 
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
-    """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}."""
+    """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}; every solid's STL and 3MF
+    checked as a slicer reads it back (`export.check_file`: else SolidError, nothing written)."""
+    passed = []  # the meshes checked as read back: a file reading back to one of them passes with it
+    meshes = checked_files(d.solid, "cushion", ("stl", "3mf"), passed)
+    for name, part in d.mould_parts.items():
+        meshes |= checked_files(part, name, passed=passed)
+    meshes |= checked_files(d.frame.mesh, "frame", passed=passed)
+    meshes |= checked_assembly({"cushion": d.solid, "frame": d.frame.mesh}, "assembly", passed)
     return {
         "registered_template.ply": registration_ply(d.registration),
         "contact_curve.json": json_bytes(contact_curve_record(d)),
-        "cushion.stl": stl_bytes(d.solid),
-        "cushion.3mf": threemf_bytes(d.solid, "cushion"),
-        **{f"{name}.stl": stl_bytes(part) for name, part in d.mould_parts.items()},
-        "frame.stl": stl_bytes(d.frame.mesh),
-        "assembly.3mf": assembly_3mf_bytes({"cushion": d.solid, "frame": d.frame.mesh}),
+        **meshes,
         "mask.json": json_bytes(mask_record(d)),
         "fit.json": json_bytes(design_record(d, scan)),
     }

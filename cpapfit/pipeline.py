@@ -136,7 +136,7 @@ class Design:
     rim: RimGap  # the rim before its pressure-compensating pre-load, against the scan
     quality: Quality  # the scan's quality gates (none refuses: else no design)
     preload: Preload  # the rim set into the skin along the axis, along the seal curve
-    mould_parts: dict  # {"mould_left" | "mould_right" | "mould_core": trimesh.Trimesh}, checked
+    mould_parts: dict  # {"mould_left" | "mould_right" | "mould_face" | "mould_core": trimesh.Trimesh}, checked as written (outputs.py)
     mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
     fits: dict  # {"custom" | "stock": CushionFit}: the custom cushion at its recommended force, the best stock size at its own
     fit_params: FitParams
@@ -203,7 +203,7 @@ def design(
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
     checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould, frame")
-    moulded = checked_mould(cushion, solid)
+    moulded = mould(cushion, solid)
     frame = build_frame(cushion, solid)
     frame_checks = check_closed(frame.mesh, "the frame")
     fits = evaluate(face, {"custom": solid}, params, fit_params)
@@ -245,14 +245,6 @@ def assessed(scan: Scan, mask: str, placement: Placement, params: CushionParams 
     shape = proportions(load_template().vertices, al.similarity, reg)
     gates = require_quality(assess(scan, al.landmarks, reg, contact, rim, shape, placement.by_shape, quality))
     return Assessed(face, contact, neutral, rim, gates)
-
-
-def checked_mould(cushion: Cushion, solid: trimesh.Trimesh):
-    """Stage mould: the casting mould of a cushion, every part checked closed."""
-    moulded = mould(cushion, solid)
-    for name, part in moulded.parts.items():
-        check_closed(part, name)
-    return moulded
 
 
 def _checked(solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str, landmarks_path: str) -> dict:

@@ -6,7 +6,7 @@ import numpy as np
 
 from . import __version__
 from .dead_space import CUSHION_SHARE
-from .draft import MIN_DRAFT_DEG
+from .draft import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG, Draft
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
@@ -32,11 +32,21 @@ def mask_dimensions(d: Design) -> dict:
 def mould_record(drafts: dict) -> dict:
     """The casting mould's part of fit.json: each part's demoulding draft, and what it means."""
     return {
-        **{name: d.record() for name, d in drafts.items()},
+        **{name: d.record() | {"left": _left(d)} for name, d in drafts.items()},
         "draft_about": f"draft of each part's moulding surface along its pull direction; below {MIN_DRAFT_DEG:g} deg it drags, "
-                       "below 0 it is an undercut: measured, not removed (demoulding relies on the cured silicone flexing "
-                       "out of undercuts; the parting plane is flat and the walls are not tapered)",
+                       f"below 0 it is an undercut. Target: at most {MAX_UNDERCUT:.0%} of a part's moulding area undercut and at "
+                       f"most {MAX_BELOW_MIN:.0%} under {MIN_DRAFT_DEG:g} deg (meets_target); the outer parts are split so that "
+                       "each takes the surface it faces, the core is one piece drawn through one opening",
     }
+
+
+def _left(d: Draft) -> str:
+    """What a mould part's draft leaves to the silicone, in words."""
+    shares = (f"{d.undercut_fraction:.1%} of its moulding area undercut (down to {d.min_draft_deg:.0f} deg), "
+              f"{d.below_min_fraction:.1%} under {MIN_DRAFT_DEG:g} deg")
+    if d.meets_target:
+        return f"within the target: {shares}"
+    return f"{shares}: it comes out only as the cured silicone flexes and stretches off it"
 
 
 def evaluation_record(fits: dict, params: FitParams) -> dict:

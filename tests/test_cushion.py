@@ -74,7 +74,7 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     assert set(manifest["files"]) == names and manifest["parameters"]["mask"] == "oronasal"
     assert names == {"registered_template.ply", "contact_curve.json", "cushion.stl", "cushion.3mf", "fit.json", "frame.stl",
                      "mask.json", "assembly.3mf",
-                     "mould_left.stl", "mould_right.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
+                     "mould_left.stl", "mould_right.stl", "mould_face.stl", "mould_core.stl", "report.html", "scan_landmarks.png",
                      "registration_residual.png", "contact_curve.png", "cushion_on_face.png", "mask_on_face.png", "rim_gap.png", "rim_gap_profile.png",
                      "rim_pressure.png", "rim_pressure_profile.png", "leak.png", "states_pressure.png"}
     assert f"report: {out / 'report.html'}" in err
@@ -134,7 +134,7 @@ def test_stock_cushion_is_seated_and_its_gaps_reported(designed):
 
 
 def test_mould_encloses_exactly_the_cushion(designed):
-    """Assembled, the mould halves and core leave a cavity (inside the plug) equal to the cushion,
+    """Assembled, the mould's outer parts and core leave a cavity (inside the plug) equal to the cushion,
     and no part reaches into another (points sampled inside each part lie in no other part;
     parts touch along shared faces, where an intersection volume would only measure rounding)."""
     from cpapfit.export import to_manifold
@@ -144,10 +144,12 @@ def test_mould_encloses_exactly_the_cushion(designed):
     parts = d.mould_parts
     for part in parts.values():
         assert part.is_watertight and part.volume > 0
-    left, right, core = (to_manifold(parts[k]) for k in ("mould_left", "mould_right", "mould_core"))
+    assert set(parts) == {"mould_left", "mould_right", "mould_face", "mould_core"}
+    assembled = [to_manifold(part) for part in parts.values()]
     cushion = to_manifold(d.solid)
-    block = (left + right + core).hull()
-    cavity = (block - left - right - core) ^ (to_manifold(plug(d.cushion.grid(128, 24))) + cushion)
+    block = manifold3d.Manifold.batch_boolean(assembled, manifold3d.OpType.Add).hull()
+    cavity = manifold3d.Manifold.batch_boolean([block, *assembled], manifold3d.OpType.Subtract)
+    cavity = cavity ^ (to_manifold(plug(d.cushion.grid(128, 24), d.cushion.axis)) + cushion)
     assert cavity.volume() == pytest.approx(cushion.volume(), rel=0.01)
     rng = np.random.default_rng(0)
     for name, part in parts.items():

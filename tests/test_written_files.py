@@ -1,0 +1,78 @@
+"""Mesh files checked as a slicer reads them back: float32 corners, vertices merged by position."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from cpapfit.export import SolidError, check_closed, check_file, checked_files, read_3mf_parts, read_stl, stl_bytes, threemf_bytes
+
+BOX = trimesh.creation.box((10.0, 10.0, 10.0))
+
+
+def with_edge_split(mesh: trimesh.Trimesh, share: float) -> trimesh.Trimesh:
+    """`mesh` with its first edge split at `share` of its length: a closed mesh, a T-junction nowhere."""
+    v0, v1 = mesh.edges_unique[0]
+    vertices = np.vstack([mesh.vertices, mesh.vertices[v0] + share * (mesh.vertices[v1] - mesh.vertices[v0])])
+    w, faces = len(mesh.vertices), []
+    for face in mesh.faces:
+        for k in range(3):
+            a, b, c = face[k], face[(k + 1) % 3], face[(k + 2) % 3]
+            if {a, b} == {v0, v1}:
+                faces += [[a, w, c], [w, b, c]]
+                break
+        else:
+            faces.append(face)
+    return trimesh.Trimesh(vertices, np.array(faces), process=False)
+
+
+def test_a_clean_solid_reads_back_as_written_from_stl_and_3mf():
+    stl, threemf = read_stl(stl_bytes(BOX)), read_3mf_parts(threemf_bytes(BOX, "box"))[0]
+    assert len(stl.faces) == len(threemf.faces) == 12 and len(stl.vertices) == len(threemf.vertices) == 8
+    assert np.array_equal(stl.vertices, threemf.vertices) and np.array_equal(stl.faces, threemf.faces)
+    assert check_file(stl, "box.stl")["edges_not_in_two_triangles"] == 0
+    assert checked_files(BOX, "box", ("stl", "3mf")) == {"box.stl": stl_bytes(BOX), "box.3mf": threemf_bytes(BOX, "box")}
+
+
+def test_solids_touching_in_float32_pass_in_float64_but_not_as_written():
+    """Two cubes 1e-9 mm apart along an edge: apart in float64, one edge of four triangles in the file."""
+    other = BOX.copy().apply_translation((10.0 + 1e-9, 10.0 + 1e-9, 0.0))
+    pair = trimesh.util.concatenate([BOX, other])
+    assert check_closed(pair, "pair")["self_intersecting_edges"] == 0
+    with pytest.raises(SolidError) as refused:
+        checked_files(pair, "pair")
+    assert refused.value.found["edges_not_in_two_triangles"] == 1 and "pair.stl" in str(refused.value)
+
+
+def test_a_vertex_rounding_onto_its_neighbour_leaves_zero_area_triangles():
+    """An edge split 1e-9 mm from its end: a closed solid in float64, two degenerate triangles in float32."""
+    split = with_edge_split(BOX, 1e-10)
+    assert split.is_watertight and split.area_faces.min() > 1e-10
+    with pytest.raises(SolidError) as refused:
+        checked_files(split, "split", ("3mf",))
+    assert refused.value.found["zero_area_triangles"] == 2
+
+
+def test_designed_files_are_clean_as_written(designed):
+    """Every part of a design, as its STL (and the cushion's 3MF) reads back: no vertex merged away, closed."""
+    _, d = designed
+    for name, part in {"cushion": d.solid, **d.mould_parts}.items():
+        back = read_stl(checked_files(part, name)[f"{name}.stl"])
+        assert len(back.faces) == len(part.faces) and len(back.vertices) == len(part.vertices), name
+    threemf = checked_files(d.solid, "cushion", ("3mf",))["cushion.3mf"]
+    assert check_file(read_3mf_parts(threemf)[0], "cushion.3mf")["volume_mm3"] == pytest.approx(d.solid.volume, rel=1e-5)
+
+
+def test_sheets_touching_along_an_edge_are_parted_before_writing():
+    """Two cubes sharing an edge: one manifold3d solid, but the edge is in four triangles as written;
+    the mould's clean-up cuts them apart there, losing a negligible volume."""
+    import manifold3d
+
+    from cpapfit.mould import _clean_as_written
+
+    cube = manifold3d.Manifold.cube([10.0, 10.0, 10.0])
+    pair = manifold3d.Manifold.compose([cube, cube.translate([10.0, 10.0, 0.0])])
+    with pytest.raises(SolidError):
+        checked_files(trimesh.Trimesh(pair.to_mesh().vert_properties, pair.to_mesh().tri_verts), "pair")
+    parted = _clean_as_written(pair)
+    assert check_file(read_stl(checked_files(parted, "pair")["pair.stl"]), "pair.stl")["edges_not_in_two_triangles"] == 0
+    assert parted.volume == pytest.approx(2000.0, rel=1e-3)
