@@ -18,7 +18,7 @@ import trimesh
 from .cushion.nurbs import FRAME_RING_MM, Cushion
 from .export import to_manifold, to_trimesh
 from .frame import Frame
-from .mould import plug
+from .mould import capped
 from .thresholds import DEAD_SPACE_LIMIT_ML
 
 COLUMN_MM = 1.0
@@ -47,7 +47,7 @@ def ring_clearance(cushion: Cushion, skin: trimesh.Trimesh) -> float:
 def _inside(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Trimesh:
     """The solid inside the cushion's sheet (sampled n_u x n_v), its face opening carried BEHIND_MM back into the head."""
     grid = cushion.grid(n_u, n_v)
-    return plug(np.concatenate([grid[:, :1] - BEHIND_MM * cushion.axis, grid], axis=1))
+    return capped(np.concatenate([grid[:, :1] - BEHIND_MM * cushion.axis, grid], axis=1))
 
 
 def volume_in_front(solid: trimesh.Trimesh, skin: trimesh.Trimesh, axis: np.ndarray, spacing: float = COLUMN_MM) -> float:

@@ -53,7 +53,11 @@ class Mould:
 def plug(grid: np.ndarray, axis: np.ndarray) -> trimesh.Trimesh:
     """The solid inside the cushion's sheet (an (n_u, n_v, 3) grid, mm), carried on PRINT_MM past
     both openings along the mask `axis` (unit) and capped there by fans."""
-    grid = np.concatenate([grid[:, :1] - PRINT_MM * axis, grid, grid[:, -1:] + PRINT_MM * axis], axis=1)
+    return capped(np.concatenate([grid[:, :1] - PRINT_MM * axis, grid, grid[:, -1:] + PRINT_MM * axis], axis=1))
+
+
+def capped(grid: np.ndarray) -> trimesh.Trimesh:
+    """The solid inside a tube-shaped sheet (an (n_u, n_v, 3) grid, mm), both openings capped by fans."""
     n_u, n_v, _ = grid.shape
     pts = grid.reshape(-1, 3)
     rim_c, ring_c = grid[:, 0].mean(axis=0), grid[:, -1].mean(axis=0)
