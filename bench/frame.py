@@ -19,14 +19,14 @@ import trimesh
 
 from cpapfit import __version__
 from cpapfit.errors import CpapfitError
-from cpapfit.export import check_closed, stl_bytes
-from cpapfit.frame import CONE_MM, build_frame, cone_diameter_mm
+from cpapfit.fabrication.files import check_closed, stl_bytes
+from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_phantom
 from cpapfit.metrics import sliced_diameters
 from cpapfit.pipeline import design, place_template
 from cpapfit.synthetic import make_phantom
-from cpapfit.vents import TARGET_CMH2O, TARGET_L_MIN
+from cpapfit.fabrication.vents import TARGET_CMH2O, TARGET_L_MIN
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 FROM_TIP = np.linspace(0.5, CONE_MM - 0.5, 8)

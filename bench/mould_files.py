@@ -1,7 +1,7 @@
 """The casting mould and the mesh files a design writes, on synthetic subjects (ICT and
 template-made, `cpapfit phantom`) and the shared real scans, both masks: every STL and 3MF file
 re-read as a slicer reads it (float32 corners, vertices merged by position) and checked
-(`export.check_file`: each edge in two triangles, no zero-area triangle, no self-intersection),
+(`fabrication.files.check_file`: each edge in two triangles, no zero-area triangle, no self-intersection),
 and each mould part's draft along its pull: the undercut and under-1-degree shares of its
 moulding area, and whether it meets the target (at most 5 % undercut, at least 95 % drafted by
 1 degree or more). Designs without the stock comparison (it does not touch the mould).
@@ -17,9 +17,9 @@ from pathlib import Path
 
 import cpapfit
 from cpapfit.errors import CpapfitError
-from cpapfit.export import SolidError, checked_files
+from cpapfit.fabrication.files import SolidError, checked_files
 from cpapfit.io import load_scan
-from cpapfit.mould import mould
+from cpapfit.fabrication.mould import mould
 from cpapfit.pipeline import design, place_template
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .align.nonrigid import Registration
-from .export import checked_assembly, checked_files
+from .fabrication.files import checked_assembly, checked_files
 from .io.write import json_bytes, ply_bytes
 from .pipeline import Design
 from .records import contact_curve_record, design_record, mask_record
@@ -30,7 +30,7 @@ def registration_ply(reg: Registration) -> bytes:
 
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}; every solid's STL and 3MF
-    checked as a slicer reads it back (`export.check_file`: else SolidError, nothing written)."""
+    checked as a slicer reads it back (`fabrication.files.check_file`: else SolidError, nothing written)."""
     passed = []  # the meshes checked as read back: a file reading back to one of them passes with it
     meshes = checked_files(d.solid, "cushion", ("stl", "3mf"), passed)
     for name, part in d.mould_parts.items():

@@ -21,10 +21,10 @@ from .cushion.envelope import enveloped_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import StateFit, fit_states, sleep_states
-from .dead_space import dead_space_ml, ring_clearance
-from .export import SolidError, check_closed, check_solid
-from .frame import Frame, build_frame
-from .mould import mould
+from .fabrication.dead_space import dead_space_ml, ring_clearance
+from .fabrication.files import SolidError, check_closed, check_solid
+from .fabrication.frame import Frame, build_frame
+from .fabrication.mould import mould
 from .quality.proportions import proportions
 from .quality.gates import Quality, assess, require_quality
 from .thresholds import QualityParams
@@ -137,7 +137,7 @@ class Design:
     quality: Quality  # the scan's quality gates (none refuses: else no design)
     preload: Preload  # the rim set into the skin along the axis, along the seal curve
     mould_parts: dict  # {"mould_left" | "mould_right" | "mould_face" | "mould_core": trimesh.Trimesh}, checked as written (outputs.py)
-    mould_draft: dict  # {part name: draft.Draft}: its moulding surface along its pull direction
+    mould_draft: dict  # {part name: fabrication.draft.Draft}: its moulding surface along its pull direction
     fits: dict  # {"custom" | "stock": CushionFit}: the custom cushion at its recommended force, the best stock size at its own
     fit_params: FitParams
     states: tuple[StateFit, ...]  # both cushions in each sleep state (`sleep_states`), each at its awake force

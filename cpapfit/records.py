@@ -5,20 +5,20 @@ SCHEMA_VERSION; the JSON Schema of each file is `cpapfit/schemas/<name>.schema.j
 import numpy as np
 
 from . import __version__
-from .dead_space import CUSHION_SHARE
-from .draft import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG, Draft
+from .fabrication.dead_space import CUSHION_SHARE
+from .fabrication.draft import Draft
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
 from .evaluation.membrane import BAND_MM, MEMBRANE_MAX_MM
 from .evaluation.states import AWAKE
-from .frame import BORE_MM, CONE_MM, CONE_TAPER, GAUGE_PLANE_MM, VALVE_MM, cone_diameter_mm
+from .fabrication.frame import BORE_MM, CONE_MM, CONE_TAPER, GAUGE_PLANE_MM, VALVE_MM, cone_diameter_mm
 from .io.landmarks import landmarks_record
 from .pipeline import Alignment, Design
 from .scan import Scan
 from .schemas import SCHEMA_VERSION
 from .stock_fit import StockComparison
-from .thresholds import DEAD_SPACE_LIMIT_ML
+from .thresholds import DEAD_SPACE_LIMIT_ML, MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG
 
 
 def mask_dimensions(d: Design) -> dict:

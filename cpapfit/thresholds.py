@@ -137,8 +137,15 @@ class QualityParams:
     lips_apart_refuse_mm: float = 11.0
 
 
-# --- The mask's frame (`dead_space.py`) ---
+# --- The mask's frame (`fabrication/dead_space.py`) ---
 DEAD_SPACE_LIMIT_ML = {"nasal": 120.0, "oronasal": 300.0}  # the most air between the face and the connector, ml
+
+# --- Printability (`fabrication/files.py`, `fabrication/draft.py`) ---
+WALL_TOLERANCE = 0.95  # the thinnest wall may fall this far short of the set thickness
+ZERO_AREA_MM2 = 1e-10  # a triangle of a written file with less area is degenerate: float32 corners ~100 mm out resolve ~1e-5 mm
+MIN_DRAFT_DEG = 1.0  # a mould part's face with less draft than this is flagged
+UNDERCUT_DEG = -0.1  # below this a face locks against the pull (a small tolerance for flat walls' rounding)
+MAX_UNDERCUT, MAX_BELOW_MIN = 0.05, 0.05  # the mould's target: fractions of a part's moulding area undercut, under MIN_DRAFT_DEG
 
 # --- Evaluation (`cpapfit/evaluation/`) ---
 MIN_COVERED = 0.1  # less of the rim over scanned skin: nothing to evaluate

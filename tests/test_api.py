@@ -46,7 +46,7 @@ def test_the_command_line_starts_without_loading_the_stages():
 def test_io_imports_none_of_the_design_stages():
     """`cpapfit.io` reads and writes files at the edge: loading all of it loads none of the stages
     from registration on (nor the pipeline, the records or the jobs around them)."""
-    stages = ("pipeline", "align.nonrigid", "cushion", "compensation", "envelope", "evaluation", "stock_fit", "mould", "report",
+    stages = ("pipeline", "align.nonrigid", "cushion", "quality", "fabrication", "evaluation", "stock_fit", "report",
               "records", "outputs", "jobs")
     code = ("import sys, pkgutil, importlib, cpapfit.io as io\n"
             "[importlib.import_module(f'cpapfit.io.{m.name}') for m in pkgutil.iter_modules(io.__path__)]\n"

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 from PIL import Image
 
-from cpapfit.export import SolidError
+from cpapfit.fabrication.files import SolidError
 
 
 def assert_one_line_error(code, out, err, *words):
@@ -120,7 +120,7 @@ def test_missing_intrinsics_and_truncated_depth(cli, capture):
 def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path, phantom1_dir, placed1, monkeypatch, thicker):
     """Demand a wall (or membrane) thicker than the design can give: the check refuses, and no file is written."""
     import cpapfit.pipeline as pipeline
-    from cpapfit.export import check_solid
+    from cpapfit.fabrication.files import check_solid
 
     def demanding(mesh, wall, set_wall, name, membrane):
         if thicker == "wall":

@@ -13,7 +13,7 @@ import trimesh
 from records import written
 from cpapfit.cushion.contact import onto_scan, template_curve
 from cpapfit.cushion.nurbs import AROUND, ROWS
-from cpapfit.export import threemf_bytes
+from cpapfit.fabrication.files import threemf_bytes
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
@@ -137,8 +137,8 @@ def test_mould_encloses_exactly_the_cushion(designed):
     """Assembled, the mould's outer parts and core leave a cavity (inside the plug) equal to the cushion,
     and no part reaches into another (points sampled inside each part lie in no other part;
     parts touch along shared faces, where an intersection volume would only measure rounding)."""
-    from cpapfit.export import to_manifold
-    from cpapfit.mould import plug
+    from cpapfit.solids import to_manifold
+    from cpapfit.fabrication.mould import plug
 
     _, d = designed
     parts = d.mould_parts
@@ -164,7 +164,7 @@ def test_mould_encloses_exactly_the_cushion(designed):
 
 
 def test_self_intersections_are_found_and_designs_have_none(designed):
-    from cpapfit.export import self_intersecting_edges
+    from cpapfit.solids import self_intersecting_edges
 
     a = trimesh.creation.box((10, 10, 10))
     crossing = trimesh.util.concatenate([a, a.copy().apply_translation((3, 4, 2.5))])  # two boxes through each other
@@ -289,7 +289,7 @@ def test_a_seal_on_the_side_of_a_deep_nose_gives_a_cushion_that_does_not_fold(re
     from cpapfit.cushion.contact import Contact
     from cpapfit.cushion.nurbs import CushionParams, design_cushion
     from cpapfit.cushion.solid import cushion_solid
-    from cpapfit.export import WALL_TOLERANCE
+    from cpapfit.thresholds import WALL_TOLERANCE
 
     angle = 2 * np.pi * np.arange(128) / 128
     curve = np.column_stack([16 * np.cos(angle), 25 * np.sin(angle), np.zeros(128)])

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.draft import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG, draft, draft_angles
-from cpapfit.mould import moulding_faces
-from cpapfit.parting import AWAY_MM, HeightField, between, under
+from cpapfit.fabrication.draft import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG, draft, draft_angles
+from cpapfit.fabrication.mould import moulding_faces
+from cpapfit.fabrication.parting import AWAY_MM, HeightField, between, under
 
 UP = np.array([0.0, 0.0, 1.0])
 

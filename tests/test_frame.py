@@ -14,13 +14,14 @@ from scipy.spatial import cKDTree
 from cpapfit.cushion.generic import contact_on, template_cushion
 from cpapfit.cushion.solid import cushion_solid
 from cpapfit.cushion.nurbs import FRAME_RING_MM
-from cpapfit.dead_space import CUSHION_SHARE, _inside, ring_clearance, volume_in_front
+from cpapfit.fabrication.dead_space import CUSHION_SHARE, _inside, ring_clearance, volume_in_front
 from cpapfit.thresholds import DEAD_SPACE_LIMIT_ML
-from cpapfit.export import check_closed, stl_bytes, to_manifold
-from cpapfit.frame import CONE_MM, build_frame, cone_diameter_mm, mask_frame
+from cpapfit.fabrication.files import check_closed, stl_bytes
+from cpapfit.solids import to_manifold
+from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm, mask_frame
 from cpapfit.metrics import sliced_diameters
 from cpapfit.template import load_template
-from cpapfit.vents import TARGET_CMH2O, TARGET_L_MIN
+from cpapfit.fabrication.vents import TARGET_CMH2O, TARGET_L_MIN
 
 
 FLARE = 1.15  # the face's side of the cushion widened about the axis, its ring kept: the end comes in from outside the ring

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.export import SolidError, check_closed, check_file, checked_files, read_3mf_parts, read_stl, stl_bytes, threemf_bytes
+from cpapfit.fabrication.files import SolidError, check_closed, check_file, checked_files, read_3mf_parts, read_stl, stl_bytes, threemf_bytes
 
 BOX = trimesh.creation.box((10.0, 10.0, 10.0))
 
@@ -67,7 +67,7 @@ def test_sheets_touching_along_an_edge_are_parted_before_writing():
     the mould's clean-up cuts them apart there, losing a negligible volume."""
     import manifold3d
 
-    from cpapfit.mould import _clean_as_written
+    from cpapfit.fabrication.mould import _clean_as_written
 
     cube = manifold3d.Manifold.cube([10.0, 10.0, 10.0])
     pair = manifold3d.Manifold.compose([cube, cube.translate([10.0, 10.0, 0.0])])

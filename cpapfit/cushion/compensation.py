@@ -11,7 +11,7 @@ from .generic import NOSE_TIP
 from .nurbs import Cushion, CushionParams, design_cushion
 from .solid import cushion_sheet, cushion_solid
 from ..evaluation.fit import Face, FitParams, compensating_preload, fit_cushion, refined_preload
-from ..export import WALL_TOLERANCE
+from ..thresholds import WALL_TOLERANCE
 from ..frozen import freeze_arrays
 
 SMOOTHING = (3.0, 6.0, 12.0)  # Gaussian widths tried for the pre-load, in seal-curve samples (of 128)

@@ -26,7 +26,7 @@ from .solid import with_membrane
 from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
 from ..evaluation.membrane import width_for
 from ..evaluation.rim import SECTORS
-from ..export import self_intersecting_edges
+from ..solids import self_intersecting_edges
 from ..evaluation.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
 
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25

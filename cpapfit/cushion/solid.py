@@ -6,7 +6,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
 from .contact import closed_resample
-from ..export import self_intersecting_edges, to_manifold, to_trimesh
+from ..solids import self_intersecting_edges, to_manifold, to_trimesh
 from .nurbs import Cushion
 
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn

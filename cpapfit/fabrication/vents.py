@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .evaluation.fit import KPA_PER_CMH2O
-from .evaluation.leak import DISCHARGE_COEFFICIENT, orifice_l_min
+from ..evaluation.fit import KPA_PER_CMH2O
+from ..evaluation.leak import DISCHARGE_COEFFICIENT, orifice_l_min
 
 TARGET_CMH2O = (4.0, 8.0, 12.0, 16.0, 20.0)
 TARGET_L_MIN = (19.0, 28.0, 34.0, 40.0, 45.0)  # a stock nasal mask's vent flow at those pressures

@@ -23,10 +23,11 @@ import numpy as np
 import trimesh
 from trimesh.ray.ray_util import contains_points
 
-from .cushion.nurbs import Cushion
-from .cushion.solid import sheet_faces
+from ..cushion.nurbs import Cushion
+from ..cushion.solid import sheet_faces
 from .draft import Draft, draft
-from .export import as_written, to_manifold, to_trimesh, unpaired_edges
+from ..solids import to_manifold, to_trimesh
+from .files import as_written, unpaired_edges
 from .parting import AWAY_MM, GRID_MM, between, under
 
 MARGIN_MM = 8.0  # mould wall around the cushion

@@ -18,9 +18,9 @@ import manifold3d as m3
 import numpy as np
 import trimesh
 
-from .cushion.nurbs import FRAME_RING_MM, Cushion
-from .export import to_manifold, to_trimesh
-from .frozen import freeze_arrays
+from ..cushion.nurbs import FRAME_RING_MM, Cushion
+from ..solids import to_manifold, to_trimesh
+from ..frozen import freeze_arrays
 from .vents import Vents, sized_vents
 
 CONE_TIP_MM, CONE_TAPER, CONE_MM = 21.995, 1.0 / 40.0, 22.0  # ISO 5356-1 22 mm male: tip diameter, taper on diameter, length

@@ -15,11 +15,11 @@ contact band are taken as thin.
 import numpy as np
 import trimesh
 
-from .cushion.nurbs import FRAME_RING_MM, Cushion
-from .export import to_manifold, to_trimesh
+from ..cushion.nurbs import FRAME_RING_MM, Cushion
+from ..solids import to_manifold, to_trimesh
 from .frame import Frame
 from .mould import capped
-from .thresholds import DEAD_SPACE_LIMIT_ML
+from ..thresholds import DEAD_SPACE_LIMIT_ML
 
 COLUMN_MM = 1.0
 BEHIND_MM = 40.0  # the seal's opening carried this far back into the head: behind any skin inside it

@@ -1,4 +1,5 @@
-"""Printable solids: checks before anything is written, and the file formats (STL, 3MF in mm)."""
+"""Printable solids as files: the checks before anything is written (the solid, and its file read
+back as a slicer reads it), and the file formats (STL, 3MF in mm)."""
 
 import io
 import re
@@ -9,13 +10,12 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from .errors import CpapfitError
-from .rims import edge_uses
+from ..errors import CpapfitError
+from ..rims import edge_uses
+from ..solids import self_intersecting_edges, to_manifold
+from ..thresholds import WALL_TOLERANCE, ZERO_AREA_MM2
 
 
-WALL_TOLERANCE = 0.95  # the thinnest wall may fall this far short of the set thickness
-EDGE_CLEARANCE_MM = 1e-3  # a segment hitting a triangle nearer its edge than this passes through the edge (rounding), not the triangle
-ZERO_AREA_MM2 = 1e-10  # a triangle of less area is degenerate: float32 corners ~100 mm out resolve ~1e-5 mm
 STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attributes", "<u2")])
 
 
@@ -25,17 +25,6 @@ class SolidError(CpapfitError):
     def __init__(self, message: str, found: dict | None = None):
         super().__init__(message)
         self.found = found or {}
-
-
-def to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
-    """A trimesh solid as a manifold3d Manifold (float32 vertices)."""
-    return manifold3d.Manifold(manifold3d.Mesh(vert_properties=mesh.vertices.astype(np.float32), tri_verts=mesh.faces.astype(np.uint32)))
-
-
-def to_trimesh(m: manifold3d.Manifold) -> trimesh.Trimesh:
-    """A manifold3d Manifold as a trimesh solid."""
-    mesh = m.to_mesh()
-    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
 
 
 def check_closed(mesh: trimesh.Trimesh, name: str) -> dict:
@@ -63,36 +52,6 @@ def check_solid(mesh: trimesh.Trimesh, wall_mm: float, min_wall_mm: float, name:
     if thin:
         raise SolidError(f"{name} fails the printability checks ({found}); nothing was written", found)
     return found
-
-
-def self_intersecting_edges(mesh: trimesh.Trimesh, tol_mm: float = 0.05) -> int:
-    """How many edges pierce the inside of a triangle they are not part of, from one side of its
-    plane to the other (0 for a clean surface; contacts along edges, at corners or in a plane do
-    not count, nor folds within `tol_mm`, finer than a resin printer resolves, nor hits within
-    EDGE_CLEARANCE_MM of a triangle's edge, which pass through the edge): each edge is
-    cast as a segment against the mesh (Embree)."""
-    edges = mesh.edges_unique[mesh.edges_unique_length > tol_mm]
-    start, end = mesh.vertices[edges[:, 0]], mesh.vertices[edges[:, 1]]
-    direction = (end - start) / np.linalg.norm(end - start, axis=1, keepdims=True)
-    loc, ray, tri = mesh.ray.intersects_location(start, direction, multiple_hits=True)
-    corners = mesh.faces[tri]
-    foreign = ~((corners == edges[ray, :1]) | (corners == edges[ray, 1:])).any(axis=1)
-    corner, normal = mesh.vertices[corners[:, 0]], mesh.face_normals[tri]
-    side_start = np.einsum("ij,ij->i", start[ray] - corner, normal)
-    side_end = np.einsum("ij,ij->i", end[ray] - corner, normal)
-    across = (side_start * side_end < 0) & (np.minimum(np.abs(side_start), np.abs(side_end)) > tol_mm)
-    inside = _edge_clearance(mesh.vertices[corners], loc) > EDGE_CLEARANCE_MM
-    solid = mesh.area_faces[tri] > tol_mm**2  # slivers from rounding have no side to pierce
-    return len(np.unique(ray[foreign & across & inside & solid]))
-
-
-def _edge_clearance(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(K,) distance (mm) of each point in its (K, 3, 3) triangle's plane from the triangle's
-    nearest edge (negative outside): each barycentric coordinate times the height over its edge."""
-    bary = trimesh.triangles.points_to_barycentric(triangles, points)
-    double_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
-    opposite = np.linalg.norm(np.roll(triangles, -1, axis=1) - np.roll(triangles, 1, axis=1), axis=2)  # edge facing corner i
-    return (bary * double_area[:, None] / np.maximum(opposite, 1e-300)).min(axis=1)
 
 
 def checked_files(mesh: trimesh.Trimesh, name: str, formats: tuple[str, ...] = ("stl",), passed: list | None = None) -> dict[str, bytes]:

@@ -12,9 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-MIN_DRAFT_DEG = 1.0  # less draft than this is flagged
-UNDERCUT_DEG = -0.1  # below this a face locks against the pull (a small tolerance for flat walls' rounding)
-MAX_UNDERCUT, MAX_BELOW_MIN = 0.05, 0.05  # the target: fractions of a part's moulding area
+from ..thresholds import MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG, UNDERCUT_DEG
+
 
 
 @dataclass(frozen=True)

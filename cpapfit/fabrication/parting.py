@@ -14,7 +14,7 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
-from .frozen import freeze_arrays
+from ..frozen import freeze_arrays
 
 GRID_MM = 1.0  # grid step of a parting surface
 AWAY_MM = 1.5  # a part absent from a column: its surface this far below the region
