@@ -60,8 +60,9 @@ def nasal1(phantom1_dir):
 @pytest.fixture
 def placed1(nasal1, monkeypatch):
     """`pipeline.place_template` answering with seed 1's placement (`nasal1`'s), for tests of the stages after it."""
-    from cpapfit import pipeline
+    from cpapfit import commands, pipeline  # commands imported first: its own names stay the real ones
 
+    assert commands.place_template is pipeline.place_template
     placement = pipeline.Placement(nasal1.design.alignment, nasal1.design.registration, None)
     monkeypatch.setattr(pipeline, "place_template", lambda *args, **kwargs: placement)
     return placement
