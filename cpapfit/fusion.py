@@ -18,6 +18,8 @@ from .errors import InputError
 from .frozen import freeze_arrays
 from .scan import Intrinsics
 
+POSE_DECIMALS = 6  # poses rounded so (rad, mm): ICP's threads sum in any order, rounded the same input fuses to the same bytes
+
 
 @dataclass(frozen=True)
 class Frame:
@@ -176,6 +178,7 @@ def _track(frames: list[Frame], params: FusionParams) -> tuple[dict, dict]:
                 lost[frame.name] = (f"not tracked ({100 * fit.fitness:.0f} % of it meets the model within "
                                     f"{params.icp_radii_mm[-1]:g} mm, RMS {fit.inlier_rmse:.2f} mm)")
                 continue
+            guess = np.round(guess, POSE_DECIMALS)
             motion, pose = np.linalg.inv(pose) @ guess, guess
         poses[frame.name] = pose
         recent.append(o3d.geometry.PointCloud(cloud).transform(pose))
