@@ -46,9 +46,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--glasses", action="store_true",
                    help="put a glasses frame on the face (seen by the camera, not in the truth; template population)")
     p.add_argument("--mesh", action="store_true", help="write the head as a mesh scan (head.ply, mm) instead of a capture (ict population)")
+    p.add_argument("--frames", type=int, metavar="N",
+                   help="write a sweep of N frames round the face (folders 000/, 001/, ...; ict population) instead of one capture")
     p.set_defaults(func="cmd_phantom")
 
-    scan_help = "mesh file (PLY, OBJ, STL, OFF, GLB) or RGB-D capture folder"
+    scan_help = "mesh file (PLY, OBJ, STL, OFF, GLB), RGB-D capture folder, or a folder of capture folders (a sweep, fused)"
     units_help = "units of a mesh scan: mm, cm, m, um, in (default auto: mm, cm, m or um, decided from the size of the face)"
     p = sub.add_parser("inspect", help="read a scan and say what cpapfit sees in it (units, size, valid depth)")
     p.add_argument("scan", help=scan_help)

@@ -16,12 +16,13 @@ from .io import load_scan
 from .io.cushion import load_cushion
 from .outputs import registration_ply
 from .io.landmarks import user_landmarks
-from .io.phantom import write_head_mesh, write_phantom
+from .io.phantom import write_head_mesh, write_phantom, write_sweep
 from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import ScanTask, design_folder
 from .landmarks.types import Landmarks
 from .ict.phantom import ict_head_mesh, make_ict_phantom
+from .ict.sweep import make_ict_sweep
 from .synthetic import make_phantom
 from .progress import batch_display, stage_display
 from .records import landmarks_file_record
@@ -236,13 +237,17 @@ def cmd_phantom(args) -> int:
         raise InputError("--glasses: only the template population wears glasses (--population template)")
     if args.mesh and args.population != "ict":
         raise InputError("--mesh: only the ICT population gives head meshes (--population ict)")
-    if args.mesh:
+    if args.frames is not None and (args.population != "ict" or args.mesh or not 2 <= args.frames <= 200):
+        raise InputError(f"--frames {args.frames}: a sweep is 2-200 frames of an ICT subject (--population ict, no --mesh)")
+    if args.frames is not None:
+        files = write_sweep(make_ict_sweep(args.seed, args.frames, mouth_open_mm=args.mouth_open), Path(args.out))
+    elif args.mesh:
         files = write_head_mesh(ict_head_mesh(args.seed, mouth_open_mm=args.mouth_open), Path(args.out))
     elif args.population == "ict":
         files = write_phantom(make_ict_phantom(args.seed, mouth_open_mm=args.mouth_open), Path(args.out))
     else:
         files = write_phantom(make_phantom(args.seed, mouth_open_mm=args.mouth_open, glasses=args.glasses), Path(args.out))
-    kind = "head mesh" if args.mesh else "RGB-D subject"
+    kind = "head mesh" if args.mesh else (f"sweep of {args.frames} frames" if args.frames else "RGB-D subject")
     opened = f", mouth open {args.mouth_open:g} mm" if args.mouth_open else ""
     worn = ", wearing glasses" if args.glasses else ""
     info(f"wrote synthetic {args.population} {kind} seed {args.seed}{opened}{worn}: {len(files)} files in {args.out}")

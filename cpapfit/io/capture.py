@@ -28,6 +28,27 @@ def is_capture(path: Path) -> bool:
 def load_capture(folder: Path, depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM) -> Scan:
     """Read a capture folder into a `Scan`: valid depth back-projected and triangulated, in mm."""
     folder = Path(folder)
+    intr, depth_scale, depth, image = read_frame(folder, depth_range_mm)
+    valid = np.isfinite(depth)
+    if valid.sum() < MIN_VALID_PIXELS:
+        raise InputError(
+            f"{folder}: only {int(valid.sum())} depth pixels are valid ({depth_range_mm[0]:.0f}-"
+            f"{depth_range_mm[1]:.0f} mm); the depth image is empty or in the wrong depth_scale"
+        )
+    pixel_vertex, faces = grid_triangles(depth, valid, intr)
+    vertices = backproject(depth, intr)[valid]
+    normals = _normals_towards_camera(vertices, faces)
+    return Scan(
+        vertices=vertices, faces=faces, normals=normals, source=str(folder), units="mm",
+        units_note=f"units: millimetres, from depth_scale {depth_scale:g} units per metre",
+        colors=image[valid] if image is not None else None, image=image, depth=depth, valid=valid,
+        pixel_vertex=pixel_vertex, intrinsics=intr,
+    )
+
+
+def read_frame(folder: Path, depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM):
+    """(Intrinsics, depth_scale, (H, W) float64 depth mm with NaN where invalid or outside
+    `depth_range_mm`, (H, W, 3) uint8 colour or None) of a capture folder."""
     intr, depth_scale = read_intrinsics(folder / "intrinsics.json")
     raw = _read_depth(folder / "depth.png")
     if raw.shape != (intr.height, intr.width):
@@ -38,21 +59,8 @@ def load_capture(folder: Path, depth_range_mm: tuple[float, float] = DEPTH_RANGE
     image = _read_color(folder, raw.shape)
     depth = raw.astype(np.float64) * (1000.0 / depth_scale)
     valid = (raw > 0) & (raw < 65535) & (depth >= depth_range_mm[0]) & (depth <= depth_range_mm[1])
-    if valid.sum() < MIN_VALID_PIXELS:
-        raise InputError(
-            f"{folder}: only {int(valid.sum())} depth pixels are valid ({depth_range_mm[0]:.0f}-"
-            f"{depth_range_mm[1]:.0f} mm); the depth image is empty or in the wrong depth_scale"
-        )
     depth[~valid] = np.nan
-    pixel_vertex, faces = grid_triangles(depth, valid, intr)
-    vertices = backproject(depth, intr)[valid]
-    normals = _normals_towards_camera(vertices, faces)
-    return Scan(
-        vertices=vertices, faces=faces, normals=normals, source=str(folder), units="mm",
-        units_note=f"units: millimetres, from depth_scale {depth_scale:g} units per metre",
-        colors=image[valid] if image is not None else None, image=image, depth=depth, valid=valid,
-        pixel_vertex=pixel_vertex, intrinsics=intr,
-    )
+    return intr, depth_scale, depth, image
 
 
 def read_intrinsics(path: Path) -> tuple[Intrinsics, float]:

@@ -46,6 +46,20 @@ def phantom_files(ph: Phantom) -> dict[str, bytes]:
     return files
 
 
+def sweep_files(sweep: tuple[Phantom, ...]) -> dict[str, bytes]:
+    """{relative name: bytes} of a synthetic sweep: frame k's capture in NNN/ (k with three digits)
+    and the truth (`truth_files`) in frame 0's camera frame; subject.json holds seed, identity,
+    sensor and every frame's pose."""
+    first = sweep[0]
+    files = {f"{k:03d}/{name}": data for k, ph in enumerate(sweep)
+             for name, data in capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale).items()}
+    subject = {"seed": first.seed, "cpapfit_version": __version__, "identity": first.identity,
+               "sensor": asdict(first.sensor), "frames": [ph.pose for ph in sweep]}
+    files.update(truth_files(first.surface, first.faces, "frame 000's camera (x right, y down, z forward)", subject,
+                             project(first.landmarks, first.intrinsics)))
+    return files
+
+
 def head_mesh_files(head: HeadMesh) -> dict[str, bytes]:
     """{relative name: bytes} of a head mesh scan (head.ply: mm, vertex colours) and its truth
     (`truth_files`, the mesh's frame; subject.json holds seed and identity)."""
@@ -58,6 +72,11 @@ def head_mesh_files(head: HeadMesh) -> dict[str, bytes]:
 def write_phantom(ph: Phantom, folder: Path) -> list[Path]:
     """Write a phantom's capture folder and ground truth (atomically, file by file)."""
     return write_files(Path(folder), phantom_files(ph))
+
+
+def write_sweep(sweep: tuple[Phantom, ...], folder: Path) -> list[Path]:
+    """Write a synthetic sweep's frames and ground truth (atomically, file by file)."""
+    return write_files(Path(folder), sweep_files(sweep))
 
 
 def write_head_mesh(head: HeadMesh, folder: Path) -> list[Path]:

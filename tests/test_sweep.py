@@ -1,0 +1,127 @@
+"""Sweeps: a folder of capture folders fused into one scan, against a synthetic sweep's truth, and bad sweeps."""
+
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from cpapfit.errors import InputError
+from cpapfit.fusion import Frame, FusionParams, fuse
+from cpapfit.ict.sweep import make_ict_sweep
+from cpapfit.io import load_scan
+from cpapfit.io.phantom import write_sweep
+from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.scan import Intrinsics
+from cpapfit.template import load_template
+
+
+@pytest.fixture(scope="module")
+def sweep():
+    """Four frames of ICT subject 1, yaw -35 to +35 degrees."""
+    return make_ict_sweep(1, 4)
+
+
+@pytest.fixture(scope="module")
+def sweep_dir(tmp_path_factory, sweep):
+    folder = tmp_path_factory.mktemp("sweep")
+    write_sweep(sweep, folder)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def fused(sweep_dir):
+    return load_scan(sweep_dir)
+
+
+def test_fused_sweep_lies_on_the_true_face(sweep, fused):
+    """Every frame tracked; the true face (template vertices, frame 0's camera) within 0.3 mm median
+    and 1.0 mm p95 of the fused surface, the contact bands too."""
+    assert "fused 4 of 4 frames" in fused.units_note
+    dist = surface_distance(sweep[0].surface, fused.vertices, fused.faces)
+    band = dist[mask_region(load_template())]
+    assert np.median(dist) < 0.3 and np.percentile(dist, 95) < 1.0
+    assert np.median(band) < 0.3 and np.percentile(band, 95) < 1.0
+    assert fused.colors is not None and fused.colors.std() > 5  # the colour is fused too
+
+
+def frame(name: str, ph, depth_raw=None) -> Frame:
+    """A phantom's capture as a sweep frame (its depth, or `depth_raw` in its units)."""
+    raw = ph.depth_raw if depth_raw is None else depth_raw
+    return Frame(name, np.where(raw > 0, raw * (1000.0 / ph.sensor.depth_scale), np.nan), ph.image, ph.intrinsics)
+
+
+def camera_in_frame0(sweep, k: int) -> np.ndarray:
+    """(4, 4) frame k's true camera-to-frame-0 transform (mm), from the synthetic poses."""
+    def face_to_camera(ph):
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = ph.pose["rotation"], ph.pose["translation_mm"]
+        return m
+    return face_to_camera(sweep[0]) @ np.linalg.inv(face_to_camera(sweep[k]))
+
+
+def test_only_the_head_is_fused_round_where_the_cameras_look(sweep):
+    """With an 80 mm ball and three of the four frames integrated, every fused point lies within
+    80 mm of the point nearest the cameras' true optical axes, though the face reaches beyond it;
+    the masks' contact bands on the true face are still covered."""
+    fused = fuse(tuple(frame(f"{k}", ph) for k, ph in enumerate(sweep)),
+                 FusionParams(voxel_mm=2.0, truncation_mm=6.0, head_mm=80.0, max_integrated=3))
+    cameras = [camera_in_frame0(sweep, k) for k in (0, 2, 3)]  # the three integrated: spread from first to last
+    across = [np.eye(3) - np.outer(c[:3, 2], c[:3, 2]) for c in cameras]
+    centre = np.linalg.solve(sum(across), sum(a @ c[:3, 3] for a, c in zip(across, cameras)))
+    assert np.linalg.norm(fused.vertices - centre, axis=1).max() < 80.0 + 2.0
+    assert np.linalg.norm(sweep[0].surface - centre, axis=1).max() > 95.0
+    band = surface_distance(sweep[0].surface, fused.vertices, fused.faces)[mask_region(load_template())]
+    assert np.percentile(band, 95) < 1.0
+
+
+def test_frames_without_depth_and_of_another_scene_are_dropped_with_a_note(sweep):
+    """Frame 1 with no depth, a frame of a tilted wall put in after frame 2: both dropped, each said
+    why; the rest fused (a coarse volume, for time) onto the true face."""
+    rows = np.arange(sweep[2].depth_raw.shape[0])[:, None]
+    wall = np.broadcast_to(3000 + 2 * rows, sweep[2].depth_raw.shape)  # 0.1 mm units: 300-396 mm away
+    frames = (frame("0", sweep[0]), frame("1", sweep[1], np.zeros_like(sweep[1].depth_raw)), frame("2", sweep[2]),
+              frame("wall", sweep[2], wall), frame("3", sweep[3]))
+    fused = fuse(frames, FusionParams(voxel_mm=2.0, truncation_mm=6.0))
+    assert fused.kept == ("0", "2", "3")
+    assert "frame 1 dropped: no depth" in fused.note() and "frame wall dropped: not tracked" in fused.note()
+    dist = surface_distance(sweep[0].surface, fused.vertices, fused.faces)
+    assert np.median(dist) < 0.5
+
+
+def test_a_sweep_that_cannot_be_tracked_is_refused():
+    """Frames of unrelated random surfaces: no two fit, one clear InputError."""
+    intr = Intrinsics(40, 30, 35.0, 35.0, 19.5, 14.5)
+    rng = np.random.default_rng(0)
+    frames = tuple(Frame(f"{k:03d}", 400.0 + 150.0 * rng.uniform(size=(30, 40)), None, intr) for k in range(4))
+    with pytest.raises(InputError, match="cannot be tracked"):
+        fuse(frames)
+
+
+def test_mixed_resolutions_and_bag_files_are_refused_in_one_line(sweep_dir, tmp_path, cli):
+    folder = tmp_path / "mixed"
+    shutil.copytree(sweep_dir, folder)
+    for path in sorted((folder / "003").iterdir()):
+        if path.name.endswith(".png"):
+            Image.open(path).resize((320, 240)).save(path)
+    (folder / "003" / "intrinsics.json").write_text(
+        '{"width": 320, "height": 240, "intrinsic_matrix": [300, 0, 0, 0, 300, 0, 159.5, 119.5, 1], "depth_scale": 10000}')
+    code, out, err = cli("design", folder, "--out", tmp_path / "out")
+    assert code == 2 and err.count("\n") == 1 and "frame 003 is 320x240" in err
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "take.bag").write_bytes(b"\0" * 64)
+    code, out, err = cli("inspect", tmp_path / "take.bag")
+    assert code == 2 and err.count("\n") == 1 and "pyrealsense2" in err
+
+
+def test_open3d_is_imported_only_to_fuse_a_sweep():
+    """The command line and its commands do not pay Open3D's import (seconds)."""
+    code = "import sys, cpapfit.cli, cpapfit.commands, cpapfit.api; sys.exit('open3d' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_phantom_frames_needs_the_ict_population(cli, tmp_path):
+    code, out, err = cli("phantom", "--seed", 1, "--frames", 4, "--population", "template", "--out", tmp_path / "s")
+    assert code == 2 and "--frames" in err and not (tmp_path / "s").exists()
