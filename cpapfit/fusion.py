@@ -20,6 +20,7 @@ import trimesh
 from .errors import InputError
 from .frozen import freeze_arrays
 from .scan import Intrinsics
+from .thresholds import SWEEP_MAX_RMS_MM, SWEEP_MIN_DEPTH_FRACTION, SWEEP_MIN_FRAMES, SWEEP_MIN_OVERLAP
 
 POSE_DECIMALS = 6  # poses rounded so (rad, mm): ICP's threads sum in any order, rounded the same input fuses to the same bytes
 
@@ -60,10 +61,10 @@ class FusionParams:
     icp_radii_mm: tuple[float, ...] = (20.0, 6.0, 2.0)
     icp_iterations: int = 15
     model_frames: int = 3
-    min_depth_fraction: float = 0.3
-    min_overlap: float = 0.6
-    max_rms_mm: float = 1.5
-    min_frames: int = 3
+    min_depth_fraction: float = SWEEP_MIN_DEPTH_FRACTION
+    min_overlap: float = SWEEP_MIN_OVERLAP
+    max_rms_mm: float = SWEEP_MAX_RMS_MM
+    min_frames: int = SWEEP_MIN_FRAMES
     head_mm: float = 170.0
     max_integrated: int = 30
 

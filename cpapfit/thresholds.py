@@ -27,6 +27,12 @@ DEGENERATE_AREA = 1e-12  # a triangle's area below this x the scan's extent squa
 MIN_USER_LANDMARKS = 4  # a landmarks file with fewer is refused
 CUSHION_SIZE_MM = (20.0, 250.0)  # a cushion to evaluate: its largest extent, nasal to full-face
 
+# --- A sweep of depth frames (`fusion.py`, `FusionParams`) ---
+SWEEP_MIN_DEPTH_FRACTION = 0.3  # a frame with fewer valid pixels than this share of the sweep's median has no depth: dropped
+SWEEP_MIN_OVERLAP = 0.6  # a frame whose points the model pairs fewer of (ICP fitness, finest radius) is not tracked: dropped
+SWEEP_MAX_RMS_MM = 1.5  # ... or whose pairs lie further apart (RMS)
+SWEEP_MIN_FRAMES = 3  # fewer tracked frames: the sweep is refused
+
 # --- Landmark detection (`cpapfit/landmarks/`) ---
 MIN_DETECTION_CONFIDENCE = 0.5  # MediaPipe's face detection
 MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
