@@ -8,7 +8,7 @@ planar elliptic ring, the same for every patient, at a fixed clearance above the
 
 The self-sealing membrane is a second NURBS surface, AROUND x MEMBRANE_ROWS: a thin flap rooted
 inside the flange at the seal curve and reaching inwards along the skin, its width set per column
-(`cpapfit.envelope`); the CPAP pressure in the mask lays it on the skin where the wall lifts off.
+(`cpapfit.cushion.envelope`); the CPAP pressure in the mask lays it on the skin where the wall lifts off.
 """
 
 from dataclasses import dataclass
