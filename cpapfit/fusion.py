@@ -2,7 +2,7 @@
 
 Each frame is tracked frame to model: point-to-plane ICP, coarse to fine, of its points against the
 points of the frames tracked last, starting from the last pose moved on by the last motion (and,
-should that fail, from the last pose, each also shifted to keep the subject where it was); a
+should that fail, from the same shifted to keep the subject's centre where it was); a
 tracked frame is integrated, depth and colour, into a TSDF volume, whose zero level is the mesh
 (marching cubes). Only the head is integrated: the depth within a ball round the point the cameras
 look at (where their optical axes meet), and, of a long sweep, a subset of the tracked frames
@@ -201,13 +201,12 @@ def _track(frames: list[Frame], params: FusionParams) -> tuple[dict, dict]:
 
 def _guesses(pose: np.ndarray, motion: np.ndarray, centre: np.ndarray, last_centre: np.ndarray):
     """(4, 4) poses to start ICP from, in turn: the last pose moved on by the last motion, then the
-    last pose; each also shifted so that the frame's subject centre (`centre`, its camera frame, mm)
-    lands on the last frame's (`last_centre`, the model's): the camera moves round a subject that stays put."""
-    for guess in (pose @ motion, pose):
-        yield guess
-        shifted = guess.copy()
-        shifted[:3, 3] += last_centre - guess[:3, :3] @ centre - guess[:3, 3]
-        yield shifted
+    same shifted so that the frame's subject centre (`centre`, its camera frame, mm) lands on the
+    last frame's (`last_centre`, the model's): the camera moves round a subject that stays put."""
+    guess = pose @ motion
+    shifted = guess.copy()
+    shifted[:3, 3] += last_centre - guess[:3, :3] @ centre - guess[:3, 3]
+    return guess, shifted
 
 
 def _register(cloud, model, guesses, params: FusionParams):
