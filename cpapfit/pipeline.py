@@ -32,9 +32,9 @@ from .similarity import Similarity
 from .landmarks.types import Landmarks
 from .metrics import mask_region
 from .scan import Scan, scan_surface
-from .stock_fit import StockComparison, fitting_stock
+from .stock_fit import StockComparison, fitting_stock, stock_solids
 from .template import load_template
-from .work import at_once
+from .work import ahead, at_once
 
 
 
@@ -186,11 +186,13 @@ def design(
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
     cushion onto the face awake and asleep, beside the stock cushion a clinic would fit
     (`fitting_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
-    is called as each stage starts; the stock sizes are seated by `submit` (`work.py`), alongside
-    the design when that is a worker process's. `quality`: the gates' thresholds; `registration`: the
-    nonrigid registration's parameters.
+    is called as each stage starts; the stock sizes are made (while the template is placed) and
+    seated by `submit` (`work.py`), alongside the design when that is a worker process's.
+    `quality`: the gates' thresholds; `registration`: the nonrigid registration's parameters.
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
+    if stock:
+        ahead(submit, stock_solids, mask, stock, params)
     placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality)
     al, reg = placement.alignment, placement.registration
     judged = assessed(scan, mask, placement, params, quality, on_stage)  # or refused: rescan

@@ -21,7 +21,7 @@ import trimesh
 from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
 from .evaluation.fit import CushionFit, Face, FitParams, fit_rim
-from .evaluation.rim import find_rim, in_plane, refined
+from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
 from .evaluation.states import StateFit, fit_states, merged, sleep_states
 from .work import at_once
 
@@ -159,13 +159,14 @@ def gauge_size(mask: str, registered: np.ndarray) -> str:
 
 def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockFit:
     """The stock `size` at its best seat on `face` (module docstring)."""
-    mesh = _refined_stock(mask, size, params)
+    mesh, thickness = _refined_stock(mask, size, params)
+    zone = rim_zone(_placed(mesh, face, np.zeros(2)), face.axis, face.up, thickness)  # every seat's, moved across the axis
     tried = {}
 
     def at(offset: np.ndarray) -> StockFit:
         key = tuple(np.round(offset, 6))
         if key not in tried:
-            tried[key] = _pressed(size, mesh, face, offset, params, fit_params)
+            tried[key] = _pressed(size, zone, face, offset, params, fit_params)
         return tried[key]
 
     best, centre = None, np.zeros(2)
@@ -175,6 +176,13 @@ def seated(mask: str, size: str, face: Face, params: CushionParams = CushionPara
             best = trial if best is None or trial.rank() < best.rank() else best
         centre = np.asarray(best.offset_mm)
     return best
+
+
+def stock_solids(mask: str, choice: str = "best", params: CushionParams = CushionParams()) -> None:
+    """Make (and cache in this process) the refined stock solids `fitting_stock` of `choice` seats;
+    they depend on no face, so a worker can make them while the template is placed."""
+    for size in SIZES[mask] if choice in ("best", "gauge") else (choice,):
+        _refined_stock(mask, size, params)
 
 
 @lru_cache(maxsize=8)
@@ -199,10 +207,10 @@ def _placed(mesh: trimesh.Trimesh, face: Face, offset: np.ndarray) -> trimesh.Tr
     return trimesh.Trimesh((mesh.vertices - mean_face()[BRIDGE]) @ turn.T + bridge, mesh.faces, process=False)
 
 
-def _pressed(size, refined_mesh: tuple, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
-    """The stock `size` (`refined_mesh`: (mesh, thickness), template frame) seated at `offset` (2,) mm and pressed."""
-    mesh, thickness = refined_mesh
-    rim = find_rim(_placed(mesh, face, offset), face.scan, face.registered, face.axis, face.up, thickness=thickness)
+def _pressed(size, zone: RimZone, face: Face, offset, params: CushionParams, fit_params: FitParams) -> StockFit:
+    """The stock `size` (`zone`: its `RimZone` seated on the face's nasal bridge) moved `offset` (2,) mm and pressed."""
+    across = trimesh.transformations.translation_matrix(np.asarray(offset) @ in_plane(face.axis, face.up))
+    rim = rim_in(zone.moved(across), face.scan, face.registered, face.axis, face.up)
     at_most = fit_rim(rim, face, params.flange_mm, COMFORT_N, fit_params)
     seal = at_most.seal_force_n
     if seal is None or seal * MARGIN > COMFORT_N:

@@ -12,3 +12,10 @@ def at_once(fn, *args) -> Future:
     except Exception as exc:
         done.set_exception(exc)
     return done
+
+
+def ahead(submit, fn, *args) -> None:
+    """fn(*args) started now by `submit`'s worker, for what it caches there; nothing when `submit` is
+    `at_once` (done here, it would only be done sooner, not faster, and for nothing if the run stops)."""
+    if submit is not at_once:
+        submit(fn, *args)

@@ -77,23 +77,73 @@ def in_plane(axis: np.ndarray, up: np.ndarray) -> np.ndarray:
     return np.stack([np.cross(up, axis), up])
 
 
+@dataclass(frozen=True)
+class RimZone:
+    """The vertices of a refined cushion (mm, scan frame) its contact line is found among, for one
+    mask axis: its wall near the face end (`wall` (W, 3) mm), its membrane (`thin` (M, 3) mm,
+    `thin_mm` (M,) mm thick) and the mean of all its vertices (`centre` (3,) mm), about which the
+    sectors turn. Moved across the axis, or turned about it by as much as it was made for
+    (`rim_zone`), it is the zone of the cushion so moved."""
+
+    wall: np.ndarray
+    thin: np.ndarray
+    thin_mm: np.ndarray
+    centre: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
+
+    def moved(self, transform: np.ndarray) -> "RimZone":
+        """The zone of the cushion moved by a rigid (4, 4) `transform`."""
+        wall, thin, centre = (trimesh.transform_points(np.atleast_2d(a), transform) for a in (self.wall, self.thin, self.centre))
+        return RimZone(wall, thin, self.thin_mm, centre[0])
+
+
+def rim_zone(cushion: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray, thickness: np.ndarray | None = None,
+             sectors: int = SECTORS, turn_deg: float = 0.0) -> RimZone:
+    """The `RimZone` of a `cushion` mesh about the unit mask `axis` (`up`: the head's up direction):
+    each wall vertex at most RIM_BAND_MM up the axis from the highest of the lowest wall vertices of
+    the sectors within `turn_deg` of its own, so that every vertex `rim_in` could choose stays in it
+    when the cushion is turned about the axis by up to `turn_deg` degrees. `thickness`: given, the
+    cushion is already `refined` and this is its (V,) thickness mm."""
+    fine, thickness = refined(cushion) if thickness is None else (cushion, thickness)
+    vertices = np.asarray(fine.vertices)
+    centre = vertices.mean(axis=0)
+    sector = _sector(vertices - centre, axis, up, sectors)
+    wall = thickness > MEMBRANE_MAX_MM
+    low = _lowest(vertices @ axis, sector, wall, sectors)
+    turn = int(np.ceil(abs(turn_deg) / 360.0 * sectors))
+    reach = np.max([np.roll(low, k) for k in range(-turn, turn + 1)], axis=0)
+    keep = wall & (vertices @ axis - reach[sector] <= RIM_BAND_MM)
+    thin = thickness <= MEMBRANE_MAX_MM
+    return RimZone(vertices[keep], vertices[thin], thickness[thin], centre)
+
+
 def find_rim(
     cushion: trimesh.Trimesh, scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray,
     up: np.ndarray, sectors: int = SECTORS, thickness: np.ndarray | None = None,
 ) -> RimContact:
-    """The contact line of a `cushion` mesh over a `scan` surface or point cloud, mm, scan frame. The
-    rim is found against `face_mesh` (the registered template: the whole face, no holes), its
-    clearance is measured against the scan; where the scan's skin is missing or lies more than
+    """The contact line of a `cushion` mesh over a `scan` surface or point cloud, mm, scan frame
+    (`rim_in` its `rim_zone`); `thickness`: given, the cushion is already `refined` and this is its
+    (V,) thickness mm."""
+    return rim_in(rim_zone(cushion, axis, up, thickness, sectors), scan, face_mesh, axis, up, sectors)
+
+
+def rim_in(
+    zone: RimZone, scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray,
+    up: np.ndarray, sectors: int = SECTORS,
+) -> RimContact:
+    """The contact line of a cushion (its `RimZone`) over a `scan` surface or point cloud, mm, scan
+    frame. The rim is found against `face_mesh` (the registered template: the whole face, no holes),
+    its clearance is measured against the scan; where the scan's skin is missing or lies more than
     FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
-    of the face counts: the cushion would press on it); InputError if less than
-    MIN_COVERED of the rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up
-    direction; `thickness`: given, the cushion is already `refined` and this is its (V,) thickness mm."""
-    fine, thickness = refined(cushion) if thickness is None else (cushion, thickness)
-    vertices = fine.vertices
+    of the face counts: the cushion would press on it); InputError if less than MIN_COVERED of the
+    rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
+    vertices = zone.wall
     plane = in_plane(axis, up)
-    uv = (vertices - vertices.mean(axis=0)) @ plane.T
-    sector = np.minimum((np.arctan2(uv[:, 1], uv[:, 0]) + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
-    near = _rim_band(vertices @ axis, sector, thickness > MEMBRANE_MAX_MM, sectors)  # the membrane is not the rim
+    uv = (vertices - zone.centre) @ plane.T
+    sector = _sector(vertices - zone.centre, axis, up, sectors)
+    near = _rim_band(vertices @ axis, sector, sectors)
     on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
     on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
     level = np.round(np.nan_to_num(on_face, nan=np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
@@ -110,19 +160,30 @@ def find_rim(
         raise InputError(f"only {100 * covered:.0f} % of the cushion's rim lies over scanned skin "
                          f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
-    membrane = rim_membrane(vertices, thickness, pts, MEMBRANE_SPREAD)
+    membrane = rim_membrane(zone.thin, zone.thin_mm, pts, MEMBRANE_SPREAD)
     cos = _skin_cos(skin, scan, axis)
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
     return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
-def _rim_band(height: np.ndarray, sector: np.ndarray, wall: np.ndarray, sectors: int) -> np.ndarray:
-    """(V,) bool: the `wall` vertices at most RIM_BAND_MM above the lowest wall vertex of their
-    sector (`height` (V,) mm along the axis): where a rim can be (higher up, the skin would be
-    inside the cushion's wall), the only vertices that look for the skin."""
+def _sector(offset: np.ndarray, axis: np.ndarray, up: np.ndarray, sectors: int) -> np.ndarray:
+    """(V,) the sector (of `sectors` equal angles about the axis) of each (V, 3) mm `offset` from the centre."""
+    uv = offset @ in_plane(axis, up).T
+    return np.minimum((np.arctan2(uv[:, 1], uv[:, 0]) + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
+
+
+def _lowest(height: np.ndarray, sector: np.ndarray, wall: np.ndarray, sectors: int) -> np.ndarray:
+    """(sectors,) the least `height` (V,) mm of the `wall` vertices in each sector (inf where none)."""
     low = np.full(sectors, np.inf)
     np.minimum.at(low, sector[wall], height[wall])
-    return wall & (height - low[sector] <= RIM_BAND_MM)
+    return low
+
+
+def _rim_band(height: np.ndarray, sector: np.ndarray, sectors: int) -> np.ndarray:
+    """(V,) bool: the wall vertices at most RIM_BAND_MM above the lowest of their sector (`height`
+    (V,) mm along the axis): where a rim can be (higher up, the skin would be inside the cushion's
+    wall), the only vertices that look for the skin."""
+    return height - _lowest(height, sector, np.ones(len(height), dtype=bool), sectors)[sector] <= RIM_BAND_MM
 
 
 def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:

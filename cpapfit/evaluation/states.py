@@ -29,7 +29,7 @@ from ..ict import LOWER_INNER_LIP, load_ict, template_truth
 from ..template import load_template
 from ..errors import InputError
 from .fit import CushionFit, Face, FitParams, fit_rim
-from .rim import find_rim, in_plane, refined
+from .rim import in_plane, refined, rim_in, rim_zone
 from .supine import template_supine
 
 NEIGHBOURS = 4
@@ -142,12 +142,16 @@ def moved(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float
     when neither."""
     if shift_mm == 0 and roll_deg == 0:
         return cushion
-    side = in_plane(face.axis, face.up)[0]
-    turn = trimesh.transformations.rotation_matrix(np.radians(roll_deg), face.axis, cushion.bounds.mean(axis=0))
-    turn[:3, 3] += shift_mm * side
     out = cushion.copy()
-    out.apply_transform(turn)
+    out.apply_transform(_motion(cushion, face, shift_mm, roll_deg))
     return out
+
+
+def _motion(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float) -> np.ndarray:
+    """(4, 4) the rigid motion of `moved`."""
+    turn = trimesh.transformations.rotation_matrix(np.radians(roll_deg), face.axis, cushion.bounds.mean(axis=0))
+    turn[:3, 3] += shift_mm * in_plane(face.axis, face.up)[0]
+    return turn
 
 
 @dataclass(frozen=True)
@@ -172,18 +176,20 @@ def fit_states(
     motion = motions(np.asarray(face.registered.vertices))
     thickness = thickness or {}
     fine = {name: (mesh, thickness[name]) if name in thickness else refined(mesh) for name, mesh in cushions.items()}
+    turn = max((abs(state.roll_deg) for state in states), default=0.0)
+    zones = {name: rim_zone(mesh, face.axis, face.up, t, turn_deg=turn) for name, (mesh, t) in fine.items()}
     rims = {(name, False, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
     out = []
     for state in states:
         state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
         on = state_face(face, motion.of(state))
         fits, errors = {}, []
-        for name, (mesh, thickness) in fine.items():
+        for name, (mesh, _) in fine.items():
             key = (name, state.supine, state.mouth_open_mm, state.shift_mm, state.roll_deg)
             try:
                 if key not in rims:
-                    rims[key] = find_rim(moved(mesh, face, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis,
-                                         on.up, thickness=thickness)
+                    rims[key] = rim_in(zones[name].moved(_motion(mesh, face, state.shift_mm, state.roll_deg)), on.scan, on.registered,
+                                       on.axis, on.up)
             except InputError as exc:
                 errors.append(f"{name}: {exc}")
                 continue
