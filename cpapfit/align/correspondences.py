@@ -62,7 +62,7 @@ def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
 def _subdivided_normals(scan: Scan, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Vertex normals of a subdivided scan, oriented like the original scan's."""
     normals = np.array(trimesh.Trimesh(vertices, faces, process=False).vertex_normals)
-    _, idx = cKDTree(scan.vertices).query(vertices)
+    _, idx = cKDTree(scan.vertices).query(vertices, workers=-1)
     flip = np.einsum("ij,ij->i", normals, scan.normals[idx]) < 0
     normals[flip] *= -1
     return normals

@@ -20,7 +20,7 @@ def icp_similarity(src: np.ndarray, tree: cKDTree, start: Similarity, iterations
     scan = tree.data
     for it in range(iterations):
         moved = fit.apply(src)
-        dist, idx = tree.query(moved, distance_upper_bound=MAX_PAIR_MM)  # far points: inf, quickly
+        dist, idx = tree.query(moved, distance_upper_bound=MAX_PAIR_MM, workers=-1)  # far points: inf, quickly
         near = np.isfinite(dist)
         if near.sum() < 10:
             break
@@ -28,6 +28,6 @@ def icp_similarity(src: np.ndarray, tree: cKDTree, start: Similarity, iterations
         step = umeyama(src[keep], scan[idx[keep]])
         scale = float(np.clip(step.scale, *SCALE_BOUNDS))
         fit = Similarity(scale, step.rotation, step.translation, iterations=it + 1)
-    dist, _ = tree.query(fit.apply(src), distance_upper_bound=GAP_CAP_MM)
+    dist, _ = tree.query(fit.apply(src), distance_upper_bound=GAP_CAP_MM, workers=-1)
     gap = float(np.mean(np.minimum(dist, GAP_CAP_MM)))
     return Similarity(fit.scale, fit.rotation, fit.translation, rms_mm=gap, iterations=fit.iterations)

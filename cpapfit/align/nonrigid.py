@@ -197,7 +197,7 @@ def _setups(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple
 
 def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: NonrigidParams) -> MirrorTerm:
     """The mirror term about the scan's plane of symmetry, found from the (n, 3) start's."""
-    near = np.isfinite(cKDTree(start).query(target.vertices, distance_upper_bound=params.symmetry_near_mm)[0])
+    near = np.isfinite(cKDTree(start).query(target.vertices, distance_upper_bound=params.symmetry_near_mm, workers=-1)[0])
     plane = symmetry_plane(target.vertices[near], target.normals[near], target.boundary[near], plane_of_pairs(start, mirror))
     return mirror_term(mirror, plane)
 

@@ -66,7 +66,7 @@ def symmetry_plane(points: np.ndarray, normals: np.ndarray, rims: np.ndarray, st
     step = max(1, len(points) // MAX_POINTS)
     q, qn = points[::step], normals[::step]
     for gate in np.geomspace(*PAIR_MM, iterations):
-        dist, idx = tree.query(plane.reflect(q), distance_upper_bound=gate)
+        dist, idx = tree.query(plane.reflect(q), distance_upper_bound=gate, workers=-1)
         ok = np.isfinite(dist)
         idx = np.where(ok, idx, 0)
         ok &= ~rims[idx] & (np.einsum("ij,ij->i", plane.reflect_directions(qn), normals[idx]) > NORMAL_COS)

@@ -120,7 +120,7 @@ def state_face(face: Face, move: np.ndarray) -> Face:
     if not move.any():
         return face
     registered = np.asarray(face.registered.vertices)
-    dist, near = cKDTree(registered).query(np.asarray(face.scan.vertices), k=NEIGHBOURS)
+    dist, near = cKDTree(registered).query(np.asarray(face.scan.vertices), k=NEIGHBOURS, workers=-1)
     weight = 1.0 / np.maximum(dist, 1e-6)
     scan_move = np.einsum("vk,vkc->vc", weight, move[near]) / weight.sum(axis=1, keepdims=True)
     return replace(face, scan=_moved_surface(face.scan, scan_move),
