@@ -15,7 +15,7 @@ and the shared real scans, both masks, each designed once (no stock comparison: 
 
 A design the quality gates refuse is a row saying why.
 
-Usage: .venv/bin/python bench/fabrication.py [--ict 8] [--template 8]
+Usage: .venv/bin/python bench/fabrication.py [--ict 1 2 ... 8] [--template 1 2 ... 8]
 """
 
 import argparse
@@ -43,12 +43,12 @@ PARTS = ("mould_left", "mould_right", "mould_face", "mould_core")
 FROM_TIP = np.linspace(0.5, CONE_MM - 0.5, 8)
 
 
-def subjects(n_ict: int, n_template: int, folder: Path):
-    """(name, scan path): ICT subjects 1..n_ict, template-made ones 1..n_template (written into
+def subjects(ict: list[int], template: list[int], folder: Path):
+    """(name, scan path): the ICT subjects and template-made ones of those seeds (written into
     `folder`), then fran and the TrueDepth frame where ../shared is present."""
-    for seed in range(1, n_ict + 1):
+    for seed in ict:
         yield f"ICT {seed}", cpapfit.phantom(seed, folder / f"ict{seed}")
-    for seed in range(1, n_template + 1):
+    for seed in template:
         yield f"template {seed}", cpapfit.phantom(seed, folder / f"template{seed}", population="template")
     if SHARED.is_dir():
         yield "fran", SHARED / "fran_cyberware" / "fran.obj"
@@ -98,8 +98,8 @@ def frame_row(name: str, mask: str, d, frame_stl: bytes) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--ict", type=int, default=8)
-    ap.add_argument("--template", type=int, default=8)
+    ap.add_argument("--ict", type=int, nargs="*", default=list(range(1, 9)), help="ICT subjects' seeds")
+    ap.add_argument("--template", type=int, nargs="*", default=list(range(1, 9)), help="template-made subjects' seeds")
     args = ap.parse_args()
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     print(f"cpapfit {cpapfit.__version__} at {commit}, {platform.machine()}, python {platform.python_version()}", flush=True)
@@ -108,7 +108,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for name, path in subjects(args.ict, args.template, Path(tmp)):
             scan = load_scan(path)
-            placement = place_template(scan)
+            try:
+                placement = place_template(scan)
+            except CpapfitError as exc:
+                refused.append(f"| {name} | both | refused: {exc} |")
+                print(refused[-1], flush=True)
+                continue
             for mask in ("nasal", "oronasal"):
                 try:
                     d = design(scan, mask, placement=placement, stock=None)
