@@ -29,6 +29,7 @@ from .draft import Draft, draft
 from ..solids import to_manifold, to_trimesh
 from .files import as_written, unpaired_edges
 from .parting import AWAY_MM, GRID_MM, between, under
+from ..thresholds import ZERO_AREA_MM2
 
 MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
@@ -37,6 +38,7 @@ CHANNEL_DIP_MM = 0.5  # channels start this far inside the cavity: none of their
 KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
 WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
 PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
+CLEAN_PASSES = 3  # welds (and pinch cuts) a part gets at most to be clean as written
 SLIVER_MM3 = 0.1  # a piece of a mould part smaller than this is a boolean's sliver, not material
 PROBE_MM = 0.01  # a part's face touches the cast when the cast is this far off it
 PROBE_RAYS = np.array([[0.4395, 0.6176, 0.6522], [-0.7071, 0.5, 0.5], [0.2673, -0.5345, 0.8018]])  # fixed: no random retries
@@ -132,16 +134,22 @@ def _touching_most(piece: trimesh.Trimesh, others: dict) -> str | None:
 
 
 def _clean_as_written(part: m3.Manifold) -> trimesh.Trimesh:
-    """A part made clean as its float32 file reads back (`export.check_file`): `_welded`; where two
-    of its sheets still touch (an edge of the file in four triangles), a bar PINCH_MM across cut out
-    along that edge and the part welded again."""
+    """A part made clean as its float32 file reads back (`files.check_file`): `_welded`, and again
+    while the file would still hold a triangle under ZERO_AREA_MM2 (a weld's output rounded to
+    float32 can leave two vertices one float32 step apart) or two sheets touching along an edge
+    (an edge of the file in four triangles: a bar PINCH_MM across is cut out along it first), at
+    most CLEAN_PASSES times; what is left the check at writing refuses."""
     welded = _welded(part)
-    written = as_written(to_trimesh(welded))
-    pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
     corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    for ends in pinches:
-        welded = welded - m3.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
-    return to_trimesh(_welded(welded) if len(pinches) else welded)
+    for _ in range(CLEAN_PASSES):
+        written = as_written(to_trimesh(welded))
+        pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
+        if not len(pinches) and written.area_faces.min() >= ZERO_AREA_MM2:
+            break
+        for ends in pinches:
+            welded = welded - m3.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
+        welded = _welded(welded)
+    return to_trimesh(welded)
 
 
 def _welded(part: m3.Manifold) -> m3.Manifold:
