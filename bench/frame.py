@@ -20,10 +20,9 @@ import trimesh
 from cpapfit import __version__
 from cpapfit.errors import CpapfitError
 from cpapfit.fabrication.files import check_closed, stl_bytes
-from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm
+from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm, sliced_diameters
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_phantom
-from cpapfit.metrics import sliced_diameters
 from cpapfit.pipeline import design, place_template
 from cpapfit.synthetic import make_phantom
 from cpapfit.fabrication.vents import TARGET_CMH2O, TARGET_L_MIN

@@ -39,8 +39,8 @@ from scipy.spatial.transform import Rotation
 from cpapfit import __version__
 from cpapfit.cushion.contact import template_curve
 from cpapfit.errors import CpapfitError
-from cpapfit.ict import MULTIPIE_TO_FACEMESH, load_ict
-from cpapfit.ict.phantom import ict_head_mesh, make_ict_phantom, random_subject
+from cpapfit.ict import MULTIPIE_TO_FACEMESH, load_ict, random_subject
+from cpapfit.ict.phantom import ict_head_mesh, make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files

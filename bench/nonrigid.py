@@ -24,10 +24,9 @@ from cpapfit.align.nonrigid import NonrigidParams, register
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit import metrics
-from cpapfit.metrics import mask_region
 from cpapfit.synthetic import make_phantom, with_holes
 from cpapfit.pipeline import align
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)

@@ -46,10 +46,9 @@ from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.detect import Detection, detect_landmarks
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.metrics import mask_region
 from cpapfit.synthetic import ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_colour_shift, with_holes
 from cpapfit.pipeline import align, design
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 REGION = mask_region(load_template())
 

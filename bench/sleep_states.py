@@ -35,8 +35,8 @@ from cpapfit.errors import CpapfitError
 from cpapfit.evaluation.fit import face_of, fit_rim
 from cpapfit.evaluation.rim import find_rim
 from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
-from cpapfit.ict import load_ict, template_truth
-from cpapfit.ict.phantom import ict_head_mesh, random_subject
+from cpapfit.ict import load_ict, random_subject, template_truth
+from cpapfit.ict.phantom import ict_head_mesh
 from cpapfit.synthetic import open_mouth
 from cpapfit.pipeline import design, evaluated_cushions, place_template
 from cpapfit.stock_fit import compared_stock, placed_stock

@@ -31,9 +31,9 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_sweep
 from cpapfit.io.write import write_files
-from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.metrics import surface_distance
 from cpapfit.pipeline import place_template
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "truedepth_sweep_mannequin"
 

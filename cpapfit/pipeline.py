@@ -30,10 +30,9 @@ from .quality.gates import Quality, assess, require_quality
 from .thresholds import QualityParams
 from .similarity import Similarity
 from .landmarks.types import Landmarks
-from .metrics import mask_region
 from .scan import Scan, scan_surface
 from .stock_fit import StockComparison, fitting_stock
-from .template import load_template
+from .template import load_template, mask_region
 from .work import at_once
 
 

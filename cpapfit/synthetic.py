@@ -19,9 +19,8 @@ from .frozen import freeze_arrays
 from .glasses import glasses_mesh
 from .render import Hits, raycast, shade
 from .scan import Intrinsics
-from .template import N_LANDMARKS, Template, load_template
+from .template import N_LANDMARKS, TEMPLATE_TO_CAMERA, Template, load_template
 
-TEMPLATE_TO_CAMERA = np.diag([1.0, -1.0, -1.0])  # a face looking at the camera: y up -> down, z out -> towards it
 
 
 @dataclass(frozen=True)

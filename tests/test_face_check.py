@@ -41,8 +41,7 @@ def test_a_face_whose_upper_lip_stands_nearly_as_far_out_as_its_nose_is_a_face(t
     the detection is kept, within 6 mm (mean over the mask region) of where the template truly lies."""
     from cpapfit.align.check import first_surface, nose_peak
     from cpapfit.ict.phantom import make_ict_phantom
-    from cpapfit.metrics import mask_region
-    from cpapfit.template import load_template
+    from cpapfit.template import load_template, mask_region
     from scipy.spatial import cKDTree
 
     ph = make_ict_phantom(14, pose=FRAMED)
@@ -61,8 +60,7 @@ def test_a_face_whose_upper_lip_stands_nearly_as_far_out_as_its_nose_is_a_face(t
 
 def region_off(similarity, truth) -> float:
     """Mean distance (mm) of the template's mask region placed by `similarity` from its true place."""
-    from cpapfit.metrics import mask_region
-    from cpapfit.template import load_template
+    from cpapfit.template import load_template, mask_region
 
     template = load_template()
     region = mask_region(template)

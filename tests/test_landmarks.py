@@ -21,10 +21,10 @@ from cpapfit.io.write import write_files
 from cpapfit.landmarks.cloud import facing_surface
 from cpapfit.align.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
-from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.metrics import surface_distance
 from cpapfit.synthetic import KINECT_V1, make_phantom
 from cpapfit.scan import Intrinsics, Scan
-from cpapfit.template import central_face, load_template
+from cpapfit.template import central_face, load_template, mask_region
 from cpapfit.thresholds import QualityParams
 
 TEMPLATE = load_template()

@@ -16,11 +16,10 @@ from cpapfit.ict.phantom import make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.metrics import mask_region
 from cpapfit.synthetic import FRAMED, make_phantom
 from cpapfit.pipeline import align, register_template, template_basis
 from cpapfit.scan import Scan
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)

@@ -13,9 +13,9 @@ from cpapfit.fusion import Frame, FusionParams, fuse
 from cpapfit.ict.sweep import make_ict_sweep
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_sweep
-from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.metrics import surface_distance
 from cpapfit.scan import Intrinsics
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 
 @pytest.fixture(scope="module")

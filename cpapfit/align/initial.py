@@ -6,9 +6,8 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import InputError
-from ..metrics import mask_region
 from ..scan import Scan, robust_extent
-from ..template import Template, central_face
+from ..template import Template, central_face, mask_region
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
 from ..landmarks.cloud import facing_surface
 from .fallback import fallback_alignment

@@ -26,7 +26,7 @@ from ..synthetic import (
 from ..render import raycast
 from ..rims import edge_uses
 from ..template import load_template
-from . import LOWER_INNER_LIP, IctModel, ict_face, load_ict, template_truth
+from . import IctModel, load_ict, random_subject, template_truth
 
 VIEW_TILTS_DEG = (0.0, 30.0, 60.0)  # a frontal scanner's views: straight on, and 8 round at each other tilt
 VIEW_SPACING_MM = 0.4  # their rays' spacing
@@ -53,26 +53,6 @@ class HeadMesh:
 
     def __post_init__(self):
         freeze_arrays(self)
-
-
-def jaw_open_weight(mouth_open_mm: float, model: IctModel | None = None) -> float:
-    """The jawOpen weight that moves the lower inner lip's truth point `mouth_open_mm` (the model's
-    expressions add to any identity, so this is every face's; `model`: the shipped one if None)."""
-    model = load_ict() if model is None else model
-    move = template_truth(model.expressions[model.expression_names.index("jawOpen")])[LOWER_INNER_LIP]
-    return float(mouth_open_mm / np.linalg.norm(move))
-
-
-def random_subject(rng: np.random.Generator, mouth_open_mm: float, model: IctModel | None = None) -> tuple[np.ndarray, dict]:
-    """((V, 3) mm ICT vertices, template frame; identity record) of a random face of `model` (the
-    shipped one if None; weights ~ N(0, 1) on all its identity modes), jaw open as asked."""
-    model = load_ict() if model is None else model
-    weights = rng.normal(size=len(model.identity))
-    expression = {"jawOpen": jaw_open_weight(mouth_open_mm, model)} if mouth_open_mm > 0 else {}
-    identity = {"population": "ict", "ict_modes": len(model.identity), "ict_weights": weights.tolist(), "expression": expression}
-    if mouth_open_mm > 0:
-        identity["mouth_open_mm"] = float(mouth_open_mm)
-    return ict_face(model, weights, expression), identity
 
 
 @lru_cache(maxsize=1)

@@ -12,8 +12,8 @@ from ..synthetic import (
     skin_tone, to_camera,
 )
 from ..template import load_template
-from .phantom import ict_albedo, random_subject, scene
-from . import template_truth
+from .phantom import ict_albedo, scene
+from . import random_subject, template_truth
 
 SWEEP_YAW_DEG = 35.0
 JITTER = PoseRange(yaw_deg=0.0, pitch_deg=3.0, roll_deg=2.0, off_centre=0.15)  # a hand-held camera's wobble
