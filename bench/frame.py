@@ -24,7 +24,7 @@ from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm, sl
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_phantom
 from cpapfit.pipeline import design, place_template
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.fabrication.vents import TARGET_CMH2O, TARGET_L_MIN
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"

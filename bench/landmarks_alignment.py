@@ -20,8 +20,8 @@ from cpapfit.align.initial import initial_alignment
 from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
-from cpapfit.metrics import surface_distance
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.accuracy import surface_distance
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.scan import Scan
 from cpapfit.template import load_template, mask_region
 

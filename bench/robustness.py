@@ -41,12 +41,14 @@ from scipy.spatial import cKDTree
 from cpapfit.similarity import fit_similarity
 from cpapfit.errors import CpapfitError
 from cpapfit.ict import load_ict
-from cpapfit.ict.phantom import make_ict_phantom
+from cpapfit.synthetic.ict_phantom import make_ict_phantom
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.detect import Detection, detect_landmarks
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.synthetic import ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_colour_shift, with_holes
+from cpapfit.synthetic.template_phantom import (
+    ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_colour_shift, with_holes,
+)
 from cpapfit.pipeline import align, design
 from cpapfit.template import load_template, mask_region
 

@@ -79,8 +79,8 @@ class DesignResult:
 def phantom(seed: int, folder: str | Path, population: str = "ict", mouth_open_mm: float = 0.0) -> Path:
     """A synthetic subject (an RGB-D capture with its ground truth, `cpapfit phantom`) written into
     `folder`; the folder, for `load_scan`."""
-    from .ict.phantom import make_ict_phantom
-    from .synthetic import make_phantom
+    from .synthetic.ict_phantom import make_ict_phantom
+    from .synthetic.template_phantom import make_phantom
 
     make = make_ict_phantom if population == "ict" else make_phantom
     write_phantom(make(seed, mouth_open_mm=mouth_open_mm), Path(folder))

@@ -13,8 +13,8 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.metrics import flipped_triangles, scan_to_template
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.accuracy import flipped_triangles, scan_to_template
+from cpapfit.synthetic.template_phantom import FRAMED, make_phantom
 from cpapfit.pipeline import align
 from cpapfit.rgbd import project
 from cpapfit.scan import Scan

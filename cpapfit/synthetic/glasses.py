@@ -9,7 +9,7 @@ the subject's truth is the face under them.
 import numpy as np
 import trimesh
 
-from .template import Template
+from ..template import Template
 
 RIM_MM = (25.0, 17.0)  # half width, half height
 RIM_DROP_MM = 3.0  # the rims' middle below the eye corners' level

@@ -7,13 +7,13 @@ a fused sweep (in its first frame's camera frame) is measured against frame 0's 
 import numpy as np
 
 from ..render import raycast
-from ..synthetic import (
+from .template_phantom import (
     Phantom, PoseRange, SensorModel, camera_image, place_in_view, random_intrinsics, random_light, sensor_depth,
     skin_tone, to_camera,
 )
 from ..template import load_template
-from .phantom import ict_albedo, scene
-from . import random_subject, template_truth
+from .ict_phantom import ict_albedo, scene
+from ..ict import random_subject, template_truth
 
 SWEEP_YAW_DEG = 35.0
 JITTER = PoseRange(yaw_deg=0.0, pitch_deg=3.0, roll_deg=2.0, off_centre=0.15)  # a hand-held camera's wobble

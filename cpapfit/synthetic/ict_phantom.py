@@ -19,14 +19,14 @@ from scipy.spatial import cKDTree
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
 from ..frozen import freeze_arrays
-from ..synthetic import (
+from .template_phantom import (
     ANY_POSE, BROW_SHADE, CAVITY_MM, IRIS, LIP_TINT, MOUTH_INSIDE, SCLERA, Phantom, PoseRange, SensorModel,
     camera_image, face_regions, place_in_view, random_intrinsics, random_light, sensor_depth, skin_tone, to_camera,
 )
 from ..render import raycast
 from ..rims import edge_uses
 from ..template import load_template
-from . import IctModel, load_ict, random_subject, template_truth
+from ..ict import IctModel, load_ict, random_subject, template_truth
 
 VIEW_TILTS_DEG = (0.0, 30.0, 60.0)  # a frontal scanner's views: straight on, and 8 round at each other tilt
 VIEW_SPACING_MM = 0.4  # their rays' spacing

@@ -15,11 +15,11 @@ from matplotlib.path import Path as Polygon
 from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
-from .frozen import freeze_arrays
+from ..frozen import freeze_arrays
 from .glasses import glasses_mesh
-from .render import Hits, raycast, shade
-from .scan import Intrinsics
-from .template import N_LANDMARKS, TEMPLATE_TO_CAMERA, Template, load_template
+from ..render import Hits, raycast, shade
+from ..scan import Intrinsics
+from ..template import N_LANDMARKS, TEMPLATE_TO_CAMERA, Template, load_template
 
 
 

@@ -1,0 +1,1 @@
+"""Synthetic subjects with ground truth: faces made, posed before a virtual depth camera and rendered."""
