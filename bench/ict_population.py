@@ -44,7 +44,7 @@ from cpapfit.synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic.template_phantom import FRAMED, to_camera
+from cpapfit.synthetic.camera import FRAMED, to_camera
 from cpapfit.pipeline import design, place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import MASKS, load_template

@@ -24,7 +24,8 @@ from cpapfit.align.nonrigid import NonrigidParams, register
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit.synthetic import accuracy as truth
-from cpapfit.synthetic.template_phantom import make_phantom, with_holes
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.defects import with_holes
 from cpapfit.pipeline import align
 from cpapfit.template import load_template, mask_region
 

@@ -46,9 +46,9 @@ from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.detect import Detection, detect_landmarks
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.synthetic.template_phantom import (
-    ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_colour_shift, with_holes,
-)
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import ANY_POSE, FRAMED, KINECT_V1, SensorModel
+from cpapfit.synthetic.defects import with_colour_shift, with_holes
 from cpapfit.pipeline import align, design
 from cpapfit.template import load_template, mask_region
 

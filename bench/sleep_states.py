@@ -37,7 +37,7 @@ from cpapfit.evaluation.rim import find_rim
 from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
 from cpapfit.ict import load_ict, random_subject, template_truth
 from cpapfit.synthetic.ict_phantom import ict_head_mesh
-from cpapfit.synthetic.template_phantom import open_mouth
+from cpapfit.synthetic.mouth import open_mouth
 from cpapfit.pipeline import design, evaluated_cushions, place_template
 from cpapfit.stock_fit import compared_stock, placed_stock
 from cpapfit.template import MASKS, load_template

@@ -9,7 +9,8 @@ from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic.template_phantom import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align
 
 

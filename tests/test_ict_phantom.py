@@ -12,7 +12,7 @@ from cpapfit.synthetic.ict_phantom import ict_head_mesh, make_ict_phantom, scene
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import phantom_files
 from cpapfit.landmarks.facemesh import detect
-from cpapfit.synthetic.template_phantom import to_camera
+from cpapfit.synthetic.camera import to_camera
 from cpapfit.render import raycast
 from cpapfit.rgbd import project
 from cpapfit.template import load_template

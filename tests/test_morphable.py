@@ -16,7 +16,8 @@ from cpapfit.synthetic.ict_phantom import make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic.template_phantom import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align, register_template, template_basis
 from cpapfit.scan import Scan
 from cpapfit.template import load_template, mask_region

@@ -14,7 +14,8 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.synthetic.accuracy import flipped_triangles, scan_to_template
-from cpapfit.synthetic.template_phantom import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align
 from cpapfit.rgbd import project
 from cpapfit.scan import Scan

@@ -8,7 +8,7 @@ import trimesh
 
 from .. import __version__
 from ..synthetic.ict_phantom import HeadMesh
-from ..synthetic.template_phantom import Phantom
+from ..synthetic.camera import Phantom
 from ..rgbd import project
 from ..template import N_LANDMARKS, load_template
 from .capture import capture_files

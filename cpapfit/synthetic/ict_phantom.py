@@ -19,10 +19,12 @@ from scipy.spatial import cKDTree
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
 from ..frozen import freeze_arrays
-from .template_phantom import (
-    ANY_POSE, BROW_SHADE, CAVITY_MM, IRIS, LIP_TINT, MOUTH_INSIDE, SCLERA, Phantom, PoseRange, SensorModel,
-    camera_image, face_regions, place_in_view, random_intrinsics, random_light, sensor_depth, skin_tone, to_camera,
+from .camera import (
+    ANY_POSE, Phantom, PoseRange, SensorModel, camera_image, place_in_view, random_intrinsics, random_light,
+    sensor_depth, to_camera,
 )
+from .skin import BROW_SHADE, IRIS, LIP_TINT, SCLERA, face_regions, skin_tone
+from .mouth import CAVITY_MM, MOUTH_INSIDE
 from ..render import raycast
 from ..rims import edge_uses
 from ..template import load_template

@@ -7,10 +7,11 @@ a fused sweep (in its first frame's camera frame) is measured against frame 0's 
 import numpy as np
 
 from ..render import raycast
-from .template_phantom import (
+from .camera import (
     Phantom, PoseRange, SensorModel, camera_image, place_in_view, random_intrinsics, random_light, sensor_depth,
-    skin_tone, to_camera,
+    to_camera,
 )
+from .skin import skin_tone
 from ..template import load_template
 from .ict_phantom import ict_albedo, scene
 from ..ict import random_subject, template_truth
