@@ -1,6 +1,6 @@
 """Designs on faces the template was not made from: ICT Face Model subjects (`cpapfit.ict`), end to
 end (`pipeline.design`), both masks, as an RGB-D capture an operator framed (`make_ict_phantom`,
-`phantom.FRAMED`) and as a head mesh scan with its modelled nostril and lip insides
+`camera.FRAMED`) and as a head mesh scan with its modelled nostril and lip insides
 (`ict_head_mesh`), turned and moved at random (a mesh may come in any orientation). The faces are
 drawn from the full ICT model (`load_ict(path)`: all 100 identity modes, `--model`, by default
 ../shared/data/ict_face_model/ict_face_model.npz when present, else the shipped 40 modes), so

@@ -3,10 +3,10 @@
 sensor noise, a cheap camera far away, head yaw, a misstated depth scale or focal length and a colour image
 not registered to its depth, each designed end to end (`pipeline.design`, nasal mask).
 
-One factor at a time: every condition starts from a capture an operator framed (`phantom.FRAMED`:
+One factor at a time: every condition starts from a capture an operator framed (`camera.FRAMED`:
 yaw and pitch within +-10 deg, roll +-6 deg, the face near the middle of the frame) and changes one
 thing; the yaw rows set the yaw. The last row is the generator's whole pose range instead
-(`phantom.ANY_POSE`: yaw and pitch +-25 deg, roll +-15 deg, anywhere in view), many factors at once.
+(`camera.ANY_POSE`: yaw and pitch +-25 deg, roll +-15 deg, anywhere in view), many factors at once.
 Moderate levels (the issue's target, >= 99 %) are marked; the others are the issue's upper limits.
 
 Success = the design is made (not refused, printable cushion) and the registered template's mask

@@ -1,6 +1,6 @@
 """Sweeps fused into one scan: accuracy on synthetic ICT sweeps, and the shared real sweep designed.
 
-Synthetic (`cpapfit.ict.sweep`): per seed, a sweep of --frames frames is written and fused as
+Synthetic (`cpapfit.synthetic.ict_sweep`): per seed, a sweep of --frames frames is written and fused as
 `cpapfit` reads it; the fused surface is measured against the truth (every template vertex, and
 the masks' contact bands: distance to the fused mesh, mm), and the template registered on the
 fused scan against the one registered on the sweep's most frontal frame alone (contact-band

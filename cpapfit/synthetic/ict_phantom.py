@@ -3,7 +3,7 @@
 `make_ict_phantom(seed)` draws an identity (weights ~ N(0, 1) on every identity mode of the model:
 the shipped 40 by default, or those of `model=load_ict(path)`, the full model), opens the jaw if asked, poses the whole head (face with its modelled nostril and lip insides, head, neck and
 eyeballs; an open mouth's back closed CAVITY_MM behind the lips) in front of the virtual depth
-camera of `cpapfit.synthetic` and renders its colour and depth images with the same sensor model.
+camera (`camera.py`) and renders its colour and depth images with the same sensor model.
 The truth is `template_truth` of the posed face: every template vertex where it lies on this face,
 in template vertex order, camera frame (mm), so every consumer of the template phantoms reads it.
 `ict_head_mesh(seed)` gives the same head as a mesh scan (mm, template frame, vertex colours),
@@ -166,7 +166,7 @@ def make_ict_phantom(
     pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0, model: IctModel | None = None,
 ) -> Phantom:
     """The ICT subject of `seed` as an RGB-D capture with its truth: same seed and model, same
-    arrays, bit for bit. `yaw_deg`, `distance_mm` and `pose` as for `cpapfit.synthetic.make_phantom`
+    arrays, bit for bit. `yaw_deg`, `distance_mm` and `pose` as for `template_phantom.make_phantom`
     (the same face whatever the pose); `mouth_open_mm` > 0 opens the jaw (the model's jawOpen) so
     that the lower inner lip moves that far (`jaw_open_weight`). `model`: the face model drawn from
     (`load_ict()` or `load_ict(path)`; the shipped one if None). The identity's first 40 weights

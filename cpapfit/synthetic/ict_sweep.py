@@ -1,4 +1,4 @@
-"""Synthetic sweeps: one ICT subject seen by the depth camera of `cpapfit.synthetic` from a path
+"""Synthetic sweeps: one ICT subject seen by the virtual depth camera (`camera.py`) from a path
 round the face (yaw from -yaw_deg to +yaw_deg, a hand's jitter in pitch, roll and framing), each
 frame with its own sensor noise. Every frame's truth is the face in that frame's camera frame, so
 a fused sweep (in its first frame's camera frame) is measured against frame 0's truth.
