@@ -40,6 +40,7 @@ def test_landmark_noise_moves_points_along_the_skin_and_refits_the_similarity(fo
     assert noisy.similarity.scale == pytest.approx(SCALE, rel=0.01)  # 468 points: the noise averages out
     assert np.abs(noisy.similarity.rotation - TURN).max() < 0.005
     assert np.array_equal(noisy.landmarks.confidence, noisy.similarity.weights)
+    assert noisy.landmarks.note.endswith("noise of 2 mm added (seed 3)")  # a design made with it says so
     assert np.array_equal(with_noise(exact, scan, TEMPLATE, LandmarkNoise(2.0, 3)).landmarks.points, points)  # its seed's
     assert not np.array_equal(with_noise(exact, scan, TEMPLATE, LandmarkNoise(2.0, 4)).landmarks.points, points)
     assert with_noise(exact, scan, TEMPLATE, LandmarkNoise()) is exact  # none by default

@@ -33,10 +33,11 @@ def on_skin(scan: Scan, points: np.ndarray, sigma_mm: float, seed: int) -> np.nd
 
 def with_noise(found: Detection, scan: Scan, template: Template, noise: LandmarkNoise) -> Detection:
     """`found` (a detection on `scan`) with `noise` on its landmarks and the similarity refitted to
-    them, their confidence its weights; `found` itself when noise.sigma_mm is 0."""
+    them, their confidence its weights, their note saying so; `found` itself when noise.sigma_mm is 0."""
     if noise.sigma_mm == 0.0:
         return found
     lm = found.landmarks
     points = on_skin(scan, lm.points, noise.sigma_mm, noise.seed)
     fit = fit_similarity(template.vertices[lm.template_index], points)
-    return Detection(replace(lm, points=points, confidence=fit.weights), fit, found.inliers)
+    note = f"{lm.note}; noise of {noise.sigma_mm:g} mm added (seed {noise.seed})"
+    return Detection(replace(lm, points=points, confidence=fit.weights, note=note), fit, found.inliers)
