@@ -561,8 +561,8 @@ def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, 
 
     align = pipeline.align
 
-    def stray(scan, user=None):
-        al = align(scan, user)
+    def stray(scan, *args):
+        al = align(scan, *args)
         moved = scan.vertices[cKDTree(scan.vertices).query(al.landmarks.points + 15.0 * al.similarity.rotation[:, 0])[1]]
         return replace(al, landmarks=replace(al.landmarks, points=moved))
 
