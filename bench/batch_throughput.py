@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from cpapfit.io.phantom import write_phantom
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 
 
 def children_cpu() -> float:

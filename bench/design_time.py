@@ -21,7 +21,7 @@ from pathlib import Path
 
 import trimesh
 
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -30,11 +30,10 @@ import numpy as np
 import cpapfit
 from cpapfit.errors import CpapfitError
 from cpapfit.fabrication.files import check_closed, check_file, read_3mf_parts, read_stl
-from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm
+from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm, sliced_diameters
 from cpapfit.fabrication.mould import mould
 from cpapfit.fabrication.vents import TARGET_CMH2O, TARGET_L_MIN
 from cpapfit.io import load_scan
-from cpapfit.metrics import sliced_diameters
 from cpapfit.outputs import design_files
 from cpapfit.pipeline import design, place_template
 

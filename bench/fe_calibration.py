@@ -28,7 +28,7 @@ from cpapfit.evaluation.calibration import section_stiffness, strip_stiffness
 from cpapfit.evaluation.fe_checks import all_checks
 from cpapfit.evaluation.tissue import REGIONS, TissueModel
 from cpapfit.ict import load_ict
-from cpapfit.ict.phantom import ict_head_mesh
+from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.pipeline import design, place_template
 from cpapfit.template import MASKS

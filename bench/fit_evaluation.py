@@ -14,7 +14,7 @@ import numpy as np
 
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_phantom
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.pipeline import design
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"

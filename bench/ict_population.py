@@ -1,6 +1,6 @@
 """Designs on faces the template was not made from: ICT Face Model subjects (`cpapfit.ict`), end to
 end (`pipeline.design`), both masks, as an RGB-D capture an operator framed (`make_ict_phantom`,
-`phantom.FRAMED`) and as a head mesh scan with its modelled nostril and lip insides
+`camera.FRAMED`) and as a head mesh scan with its modelled nostril and lip insides
 (`ict_head_mesh`), turned and moved at random (a mesh may come in any orientation). The faces are
 drawn from the full ICT model (`load_ict(path)`: all 100 identity modes, `--model`, by default
 ../shared/data/ict_face_model/ict_face_model.npz when present, else the shipped 40 modes), so
@@ -39,12 +39,12 @@ from scipy.spatial.transform import Rotation
 from cpapfit import __version__
 from cpapfit.cushion.contact import template_curve
 from cpapfit.errors import CpapfitError
-from cpapfit.ict import MULTIPIE_TO_FACEMESH, load_ict
-from cpapfit.ict.phantom import ict_head_mesh, make_ict_phantom, random_subject
+from cpapfit.ict import MULTIPIE_TO_FACEMESH, load_ict, random_subject
+from cpapfit.synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic import FRAMED, to_camera
+from cpapfit.synthetic.camera import FRAMED, to_camera
 from cpapfit.pipeline import design, place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import MASKS, load_template

@@ -19,8 +19,7 @@ import numpy as np
 from cpapfit import __version__
 from cpapfit.align.nonrigid import Registration
 from cpapfit.similarity import fit_similarity
-from cpapfit.ict import load_ict, template_truth
-from cpapfit.ict.phantom import random_subject
+from cpapfit.ict import load_ict, random_subject, template_truth
 from cpapfit.pipeline import place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import load_template

@@ -20,10 +20,10 @@ from cpapfit.align.initial import initial_alignment
 from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
-from cpapfit.metrics import mask_region, surface_distance
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.accuracy import surface_distance
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.scan import Scan
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 
 def as_mesh(capture: Scan, rotation: np.ndarray, colour: bool) -> Scan:

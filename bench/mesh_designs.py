@@ -19,10 +19,9 @@ from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.normals import cloud_normals
 from cpapfit.io.phantom import write_phantom
-from cpapfit.metrics import mask_region
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.pipeline import design
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 from landmarks_alignment import as_mesh
 
 

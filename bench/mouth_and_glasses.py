@@ -20,7 +20,8 @@ from scipy.spatial.transform import Rotation
 from cpapfit.errors import CpapfitError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import design
 from cpapfit.template import load_template
 from landmarks_alignment import as_mesh

@@ -23,11 +23,11 @@ from cpapfit.align.correspondences import nearest_on_grid
 from cpapfit.align.nonrigid import NonrigidParams, register
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
-from cpapfit import metrics
-from cpapfit.metrics import mask_region
-from cpapfit.synthetic import make_phantom, with_holes
+from cpapfit.synthetic import accuracy as truth
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.defects import with_holes
 from cpapfit.pipeline import align
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)
@@ -40,7 +40,7 @@ def capture(ph, folder: Path, depth=None):
 
 def scan_to_template(scan, vertices):
     """Distances (mm) from scan points over the mask region to the registered template."""
-    return metrics.scan_to_template(scan.vertices, vertices, TEMPLATE.faces, REGION)
+    return truth.scan_to_template(scan.vertices, vertices, TEMPLATE.faces, REGION)
 
 
 PAPER = NonrigidParams(affine=None, detected_landmark_factor=1.0, coarse_gates=None, symmetry=0)  # the paper's method, no additions
@@ -81,7 +81,7 @@ def accuracy(seeds: int) -> None:
             "corr": correspondence(grid.vertices, ph.surface),
             "corr_similarity": correspondence(aligned, ph.surface),
             "corr_paper": correspondence(paper.vertices, ph.surface),
-            "median": np.median(d), "p95": np.percentile(d, 95), "flipped": metrics.flipped_triangles(aligned, grid.vertices, TEMPLATE.faces, REGION),
+            "median": np.median(d), "p95": np.percentile(d, 95), "flipped": truth.flipped_triangles(aligned, grid.vertices, TEMPLATE.faces, REGION),
             "modes": np.linalg.norm(grid.vertices[REGION] - kd.vertices[REGION], axis=1).mean(),
             "t_grid": t_grid, "t_kd": t_kd, "iterations": len(grid.log), "pooled": d,
         })

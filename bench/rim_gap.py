@@ -22,7 +22,7 @@ from cpapfit.evaluation.gap import rim_gap
 from cpapfit.evaluation.rim import skin_under
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_phantom
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.cushion.generic import NOSE_TIP
 from cpapfit.pipeline import design, face_for
 

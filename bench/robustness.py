@@ -3,10 +3,10 @@
 sensor noise, a cheap camera far away, head yaw, a misstated depth scale or focal length and a colour image
 not registered to its depth, each designed end to end (`pipeline.design`, nasal mask).
 
-One factor at a time: every condition starts from a capture an operator framed (`phantom.FRAMED`:
+One factor at a time: every condition starts from a capture an operator framed (`camera.FRAMED`:
 yaw and pitch within +-10 deg, roll +-6 deg, the face near the middle of the frame) and changes one
 thing; the yaw rows set the yaw. The last row is the generator's whole pose range instead
-(`phantom.ANY_POSE`: yaw and pitch +-25 deg, roll +-15 deg, anywhere in view), many factors at once.
+(`camera.ANY_POSE`: yaw and pitch +-25 deg, roll +-15 deg, anywhere in view), many factors at once.
 Moderate levels (the issue's target, >= 99 %) are marked; the others are the issue's upper limits.
 
 Success = the design is made (not refused, printable cushion) and the registered template's mask
@@ -33,23 +33,21 @@ from dataclasses import replace
 from functools import partial
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from unittest.mock import patch
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from cpapfit.similarity import fit_similarity
 from cpapfit.errors import CpapfitError
 from cpapfit.ict import load_ict
-from cpapfit.ict.phantom import make_ict_phantom
+from cpapfit.synthetic.ict_phantom import make_ict_phantom
 from cpapfit.io.capture import capture_files, load_capture
 from cpapfit.io.write import write_files
-from cpapfit.landmarks.detect import Detection, detect_landmarks
+from cpapfit.landmarks.noise import LandmarkNoise, on_skin
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.metrics import mask_region
-from cpapfit.synthetic import ANY_POSE, FRAMED, KINECT_V1, SensorModel, make_phantom, with_colour_shift, with_holes
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import ANY_POSE, FRAMED, KINECT_V1, SensorModel
+from cpapfit.synthetic.defects import with_colour_shift, with_holes
 from cpapfit.pipeline import align, design
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 REGION = mask_region(load_template())
 
@@ -78,31 +76,12 @@ CONDITIONS = [
 ]
 
 
-def on_skin(scan, points: np.ndarray, sigma: float, seed: int) -> np.ndarray:
-    """(K, 3) points moved by Gaussian noise (sigma mm per axis) and put back on the skin (nearest
-    scan point), as a landmark detector's or a user's errors are: along the face, not off it."""
-    moved = points + np.random.default_rng(seed).normal(0.0, sigma, points.shape)
-    return scan.vertices[cKDTree(scan.vertices).query(moved)[1]]
-
-
-def noisy_detector(sigma: float, seed: int):
-    """`detect_landmarks` with noise added to what it finds; the similarity is refitted to them."""
-    def detect(scan, template):
-        found = detect_landmarks(scan, template)
-        if found is None:
-            return None
-        lm = found.landmarks
-        points = on_skin(scan, lm.points, sigma, seed)
-        fit = fit_similarity(template.vertices[lm.template_index], points)
-        return Detection(replace(lm, points=points, confidence=fit.weights), fit, found.inliers)
-    return detect
-
-
 def run(seed: int, ph, scale: float = 1.0, sigma: float = 0.0, user: bool = False, focal: float = 1.0) -> dict:
     """One design: outcome, mean mask-region error (mm) against the truth as the scan shows it, and
     the face's proportions. scale, focal: the depth scale and focal length stated that many times
     too small / large (the face `scale` times too large; `focal` times too narrow and short);
-    sigma: noise (mm) on the detected landmarks, or, with `user`, on a user's landmarks file."""
+    sigma: noise (mm) on the detected landmarks (`LandmarkNoise`, drawn from the subject's seed), or, with
+    `user`, on a user's landmarks file (the same noise model, `on_skin`)."""
     stated = replace(ph.intrinsics, fx=ph.intrinsics.fx * focal, fy=ph.intrinsics.fy * focal)
     with tempfile.TemporaryDirectory() as tmp:
         write_files(Path(tmp), capture_files(ph.image, ph.depth_raw, stated, ph.sensor.depth_scale / scale))
@@ -112,8 +91,7 @@ def run(seed: int, ph, scale: float = 1.0, sigma: float = 0.0, user: bool = Fals
             lm = align(scan).landmarks
             d = design(scan, "nasal", Landmarks(on_skin(scan, lm.points, sigma, seed), lm.template_index, lm.confidence, "user"))
         else:
-            with patch("cpapfit.align.initial.detect_landmarks", noisy_detector(sigma, seed) if sigma else detect_landmarks):
-                d = design(scan, "nasal")
+            d = design(scan, "nasal", landmark_noise=LandmarkNoise(sigma, seed))
     except CpapfitError as exc:
         return {"outcome": "refused", "reason": f"{type(exc).__name__}: {str(exc).split(':')[0][:60]}", "message": str(exc)}
     seen = scale * ph.surface[REGION] * [1.0 / focal, 1.0 / focal, 1.0]  # camera frame: x and y scale with 1 / fx

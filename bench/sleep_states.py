@@ -6,7 +6,7 @@ ways at the design's headgear force:
 - true: the same cushions pressed onto the ICT face itself in that state, its registered template
   the truth (`HeadMesh.truth`), the mouth opened by the model's own jawOpen (`ict_head_mesh(...,
   mouth_open_mm=)`), or by a second, independent jaw model (`--jaw hinge`: the mandible turned about
-  its hinge as the template population's phantoms open it, `cpapfit.synthetic.open_mouth`, on the
+  its hinge as the template population's phantoms open it, `cpapfit.synthetic.mouth.open_mouth`, on the
   true template's surface), lying on the back by the measured skin slide (`cpapfit.evaluation.supine`)
   carried onto the true template, the mask moved as the state says.
 Also the awake truth, and the mask moved 10 mm sideways on the true face (a cushion that far off must
@@ -35,9 +35,9 @@ from cpapfit.errors import CpapfitError
 from cpapfit.evaluation.fit import face_of, fit_rim
 from cpapfit.evaluation.rim import find_rim
 from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
-from cpapfit.ict import load_ict, template_truth
-from cpapfit.ict.phantom import ict_head_mesh, random_subject
-from cpapfit.synthetic import open_mouth
+from cpapfit.ict import load_ict, random_subject, template_truth
+from cpapfit.synthetic.ict_phantom import ict_head_mesh
+from cpapfit.synthetic.mouth import open_mouth
 from cpapfit.pipeline import design, evaluated_cushions, place_template
 from cpapfit.stock_fit import compared_stock, placed_stock
 from cpapfit.template import MASKS, load_template
@@ -50,7 +50,7 @@ KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_regio
 def head(seed: int, source: Path | None, mouth_open_mm: float, jaw: str):
     """(surface mesh, true registered template (N, 3)) of subject `seed`, mouth open as asked: the
     ICT head mesh opened by the model's jawOpen, or (`jaw` "hinge") the true template's surface with
-    the mandible turned about its hinge (`cpapfit.synthetic.open_mouth`, the template population's jaw)."""
+    the mandible turned about its hinge (`cpapfit.synthetic.mouth.open_mouth`, the template population's jaw)."""
     model = load_ict(source)
     if jaw == "ict":
         h = ict_head_mesh(seed, mouth_open_mm=mouth_open_mm, model=model)

@@ -19,7 +19,7 @@ import numpy as np
 from cpapfit import __version__
 from cpapfit.errors import CpapfitError
 from cpapfit.ict import load_ict
-from cpapfit.ict.phantom import ict_head_mesh
+from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.pipeline import face_for, place_template
 from cpapfit.stock_fit import COMFORT_N, compared_stock

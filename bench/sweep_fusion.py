@@ -1,6 +1,6 @@
 """Sweeps fused into one scan: accuracy on synthetic ICT sweeps, and the shared real sweep designed.
 
-Synthetic (`cpapfit.ict.sweep`): per seed, a sweep of --frames frames is written and fused as
+Synthetic (`cpapfit.synthetic.ict_sweep`): per seed, a sweep of --frames frames is written and fused as
 `cpapfit` reads it; the fused surface is measured against the truth (every template vertex, and
 the masks' contact bands: distance to the fused mesh, mm), and the template registered on the
 fused scan against the one registered on the sweep's most frontal frame alone (contact-band
@@ -26,14 +26,14 @@ import numpy as np
 import trimesh
 
 from cpapfit import __version__
-from cpapfit.ict.sweep import make_ict_sweep
+from cpapfit.synthetic.ict_sweep import make_ict_sweep
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_sweep
 from cpapfit.io.write import write_files
-from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.synthetic.accuracy import surface_distance
 from cpapfit.pipeline import place_template
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "truedepth_sweep_mannequin"
 

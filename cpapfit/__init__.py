@@ -2,7 +2,7 @@
 
 The public API (`cpapfit.api`, loaded on first use so that the command line starts quickly):
 `load_scan`, `phantom`, `design`, `evaluate`, `Params` (with `NonrigidParams`, `CushionParams`,
-`FitParams`, `QualityParams`) and `DesignResult`.
+`FitParams`, `QualityParams`, `LandmarkNoise`) and `DesignResult`.
 """
 
 import os
@@ -12,7 +12,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 __version__ = "0.2.0"
-__all__ = ["load_scan", "phantom", "design", "evaluate", "Params", "NonrigidParams", "CushionParams", "FitParams", "QualityParams", "DesignResult"]
+__all__ = ["load_scan", "phantom", "design", "evaluate", "Params", "NonrigidParams", "CushionParams", "FitParams", "QualityParams", "LandmarkNoise", "DesignResult"]
 
 
 def __getattr__(name: str):

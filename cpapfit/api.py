@@ -26,25 +26,27 @@ from .outputs import design_files, report_files
 from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template
 from .pipeline import design as designed
 from .jobs import ScanTask, save_folder
+from .landmarks.noise import LandmarkNoise
 from .thresholds import QualityParams
 from .records import evaluate_record, manifest_record
 from .scan import Scan
 from .stock_fit import compared_stock
 
-__all__ = ["Params", "NonrigidParams", "CushionParams", "FitParams", "QualityParams", "DesignResult", "load_scan", "phantom", "design", "evaluate"]
+__all__ = ["Params", "NonrigidParams", "CushionParams", "FitParams", "QualityParams", "LandmarkNoise", "DesignResult", "load_scan", "phantom", "design", "evaluate"]
 
 
 @dataclass(frozen=True)
 class Params:
     """Every setting of a design in one place: the template's registration, the cushion's shape, the
-    fit model, the quality gates' thresholds, and the stock cushion to compare with (a size,
-    "gauge", "best" or None)."""
+    fit model, the quality gates' thresholds, the stock cushion to compare with (a size,
+    "gauge", "best" or None), and noise on the detected landmarks (robustness studies; none by default)."""
 
     registration: NonrigidParams = NonrigidParams()
     cushion: CushionParams = CushionParams()
     fit: FitParams = FitParams()
     quality: QualityParams = QualityParams()
     stock: str | None = "best"
+    landmark_noise: LandmarkNoise = LandmarkNoise()
 
 
 @dataclass(frozen=True)
@@ -79,8 +81,8 @@ class DesignResult:
 def phantom(seed: int, folder: str | Path, population: str = "ict", mouth_open_mm: float = 0.0) -> Path:
     """A synthetic subject (an RGB-D capture with its ground truth, `cpapfit phantom`) written into
     `folder`; the folder, for `load_scan`."""
-    from .ict.phantom import make_ict_phantom
-    from .synthetic import make_phantom
+    from .synthetic.ict_phantom import make_ict_phantom
+    from .synthetic.template_phantom import make_phantom
 
     make = make_ict_phantom if population == "ict" else make_phantom
     write_phantom(make(seed, mouth_open_mm=mouth_open_mm), Path(folder))
@@ -92,7 +94,7 @@ def design(scan: Scan, mask: str = "nasal", landmarks: str | Path | None = None,
     """`cpapfit design` of a loaded scan: `landmarks` a landmarks file (in the scan's units) to use
     instead of detection; `report` whether to draw report.html and its pictures."""
     d = designed(scan, mask, user_landmarks(landmarks, scan), params.cushion, params.fit, stock=params.stock, quality=params.quality,
-                 registration=params.registration)
+                 registration=params.registration, landmark_noise=params.landmark_noise)
     files = design_files(d, scan)
     return DesignResult(d, scan, files | (report_files(d, scan, files) if report else {}), params.stock)
 
@@ -106,7 +108,8 @@ def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False
     `states` every state of the sleeping face. The fit.json record."""
     if (generic or stock or states) and not mask:
         raise InputError("generic, stock and states need the mask (nasal or oronasal): which cushion to compare with, which states to press")
-    placed = place_template(scan, user_landmarks(landmarks, scan), params=params.registration, quality=params.quality)
+    placed = place_template(scan, user_landmarks(landmarks, scan), params=params.registration, quality=params.quality,
+                            landmark_noise=params.landmark_noise)
     face = face_for(scan, placed.alignment, placed.registration)
     cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
     fits = evaluated(face, cushions, params.cushion, params.fit, force_n)

@@ -21,9 +21,9 @@ from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, write_bytes, write_files
 from .jobs import ScanTask, design_folder
 from .landmarks.types import Landmarks
-from .ict.phantom import ict_head_mesh, make_ict_phantom
-from .ict.sweep import make_ict_sweep
-from .synthetic import make_phantom
+from .synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
+from .synthetic.ict_sweep import make_ict_sweep
+from .synthetic.template_phantom import make_phantom
 from .progress import batch_display, stage_display
 from .records import landmarks_file_record
 from .pipeline import Alignment, place_template

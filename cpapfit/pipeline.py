@@ -29,11 +29,11 @@ from .quality.proportions import proportions
 from .quality.gates import Quality, assess, require_quality
 from .thresholds import QualityParams
 from .similarity import Similarity
+from .landmarks.noise import LandmarkNoise
 from .landmarks.types import Landmarks
-from .metrics import mask_region
 from .scan import Scan, scan_surface
 from .stock_fit import StockComparison, fitting_stock, stock_solids
-from .template import load_template
+from .template import load_template, mask_region
 from .work import ahead, at_once
 
 
@@ -47,9 +47,9 @@ class Alignment:
     check: FaceCheck
 
 
-def align(scan: Scan, user_landmarks: Landmarks | None = None) -> Alignment:
-    """Stages landmarks and similarity on a scan."""
-    return Alignment(*initial_alignment(scan, load_template(), user_landmarks))
+def align(scan: Scan, user_landmarks: Landmarks | None = None, landmark_noise: LandmarkNoise = LandmarkNoise()) -> Alignment:
+    """Stages landmarks and similarity on a scan (`landmark_noise` on detected landmarks: none by default)."""
+    return Alignment(*initial_alignment(scan, load_template(), user_landmarks, landmark_noise))
 
 
 def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
@@ -167,11 +167,13 @@ class Placement:
 
 
 def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage: Callable[[str], None] = _silent,
-                   params: NonrigidParams = NonrigidParams(), quality: QualityParams = QualityParams()) -> Placement:
+                   params: NonrigidParams = NonrigidParams(), quality: QualityParams = QualityParams(),
+                   landmark_noise: LandmarkNoise = LandmarkNoise()) -> Placement:
     """Stages landmarks, similarity and nonrigid: the template aligned and registered on a scan
-    (`params`: the registration's; `quality`: the thresholds deciding which landmarks it keeps)."""
+    (`params`: the registration's; `quality`: the thresholds deciding which landmarks it keeps;
+    `landmark_noise`: noise on the detected landmarks, for robustness studies)."""
     on_stage("landmarks and similarity")
-    al = align(scan, user_landmarks)
+    al = align(scan, user_landmarks, landmark_noise)
     on_stage("non-rigid registration")
     return Placement(*registered(scan, al, params, quality))
 
@@ -180,7 +182,7 @@ def design(
     scan: Scan, mask: str, user_landmarks: Landmarks | None = None, params: CushionParams = CushionParams(),
     fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
     placement: Placement | None = None, stock: str | None = "best", quality: QualityParams = QualityParams(),
-    registration: NonrigidParams = NonrigidParams(),
+    registration: NonrigidParams = NonrigidParams(), landmark_noise: LandmarkNoise = LandmarkNoise(),
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
@@ -188,12 +190,13 @@ def design(
     (`fitting_stock` of `stock`: a size, "gauge" or "best"; None: no comparison). `on_stage(name)`
     is called as each stage starts; the stock sizes are made (while the template is placed) and
     seated by `submit` (`work.py`), alongside the design when that is a worker process's.
-    `quality`: the gates' thresholds; `registration`: the nonrigid registration's parameters.
+    `quality`: the gates' thresholds; `registration`: the nonrigid registration's parameters;
+    `landmark_noise`: noise on the detected landmarks (none by default).
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
     placement serves both masks), else placed here from `user_landmarks` or detection."""
     if stock:
         ahead(submit, stock_solids, mask, stock, params)
-    placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality)
+    placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality, landmark_noise)
     al, reg = placement.alignment, placement.registration
     judged = assessed(scan, mask, placement, params, quality, on_stage)  # or refused: rescan
     face, contact = judged.face, judged.contact

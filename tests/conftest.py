@@ -12,7 +12,7 @@ from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.write import write_files
 from cpapfit.pipeline import design, place_template
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 # Fixtures that take seconds or more to make. The tests sharing one are sent to one worker process

@@ -69,3 +69,26 @@ def test_the_registration_parameters_in_params_reach_the_registration(phantom1_d
     with pytest.raises(Registering) as raised:
         cpapfit.design(cpapfit.load_scan(phantom1_dir), params=cpapfit.Params(registration=mine), report=False)
     assert raised.value.args[0] is mine
+
+
+def test_the_landmark_noise_in_params_reaches_the_detected_landmarks(nasal1, phantom1_dir, monkeypatch):
+    """Params(landmark_noise=...) moves the landmarks the registration starts from: seed 1's
+    detection (nasal1's) with that noise, along the skin (`on_skin`), bit for bit."""
+    import cpapfit
+    from cpapfit import pipeline
+    from cpapfit.landmarks.noise import on_skin
+
+    class Registering(Exception):
+        pass
+
+    def register(*args):
+        raise Registering(args[3])  # register(template, faces, scan, landmarks, ...)
+
+    monkeypatch.setattr(pipeline, "register", register)
+    scan = cpapfit.load_scan(phantom1_dir)
+    with pytest.raises(Registering) as raised:
+        cpapfit.design(scan, params=cpapfit.Params(landmark_noise=cpapfit.LandmarkNoise(sigma_mm=2.0, seed=5)), report=False)
+    found, noisy = nasal1.design.alignment.landmarks, raised.value.args[0]
+    assert found.path == noisy.path == "image" and np.array_equal(noisy.template_index, found.template_index)
+    assert np.array_equal(noisy.points, on_skin(scan, found.points, 2.0, 5))
+    assert 1.0 < np.linalg.norm(noisy.points - found.points, axis=1).mean() < 4.0

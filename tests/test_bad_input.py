@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import png_bytes, write_files
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.render import raycast, shade
 from cpapfit.rgbd import project
 from cpapfit.scan import Intrinsics

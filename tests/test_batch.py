@@ -22,7 +22,7 @@ from cpapfit.cli import main
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.summary import summary_csv, summary_html
 from cpapfit.jobs import ScanTask, content_hash, run_scan
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from test_cli import assert_one_line_error
 
 

@@ -9,9 +9,8 @@ from cpapfit.align.correspondences import subdivided
 from cpapfit.rims import boundary_vertices, cloud_boundary
 from cpapfit.scan import Scan
 from cpapfit.io import load_scan
-from cpapfit.metrics import mask_region
 from cpapfit.pipeline import align, register_template
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 
 def holed_sphere():

@@ -17,7 +17,8 @@ from cpapfit.fabrication.files import threemf_bytes
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic import KINECT_V1, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import KINECT_V1
 from cpapfit.pipeline import design
 from cpapfit.scan import Scan, scan_surface
 from cpapfit.template import load_template

@@ -5,11 +5,12 @@ import pytest
 import trimesh
 
 from cpapfit.align.check import MIN_BELOW_MM, MIN_RIDGE_MM
-from cpapfit.ict.phantom import ict_head_mesh
+from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align
 
 
@@ -40,9 +41,8 @@ def test_a_face_whose_upper_lip_stands_nearly_as_far_out_as_its_nose_is_a_face(t
     shows. The deepest of the scan 20-40 mm below (the mouth's line) lies well below the tip, and
     the detection is kept, within 6 mm (mean over the mask region) of where the template truly lies."""
     from cpapfit.align.check import first_surface, nose_peak
-    from cpapfit.ict.phantom import make_ict_phantom
-    from cpapfit.metrics import mask_region
-    from cpapfit.template import load_template
+    from cpapfit.synthetic.ict_phantom import make_ict_phantom
+    from cpapfit.template import load_template, mask_region
     from scipy.spatial import cKDTree
 
     ph = make_ict_phantom(14, pose=FRAMED)
@@ -61,8 +61,7 @@ def test_a_face_whose_upper_lip_stands_nearly_as_far_out_as_its_nose_is_a_face(t
 
 def region_off(similarity, truth) -> float:
     """Mean distance (mm) of the template's mask region placed by `similarity` from its true place."""
-    from cpapfit.metrics import mask_region
-    from cpapfit.template import load_template
+    from cpapfit.template import load_template, mask_region
 
     template = load_template()
     region = mask_region(template)
@@ -77,7 +76,7 @@ def test_a_low_nose_is_a_face_when_a_second_look_agrees(tmp_path, monkeypatch):
     the image's face is kept and says so. Without the second look it is refused, as before."""
     from cpapfit.align import initial
     from cpapfit.errors import InputError
-    from cpapfit.ict.phantom import make_ict_phantom
+    from cpapfit.synthetic.ict_phantom import make_ict_phantom
 
     ph = make_ict_phantom(6, pose=FRAMED)
     write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))

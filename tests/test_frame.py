@@ -18,8 +18,7 @@ from cpapfit.fabrication.dead_space import CUSHION_SHARE, _inside, ring_clearanc
 from cpapfit.thresholds import DEAD_SPACE_LIMIT_ML
 from cpapfit.fabrication.files import check_closed, stl_bytes
 from cpapfit.solids import to_manifold
-from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm, mask_frame
-from cpapfit.metrics import sliced_diameters
+from cpapfit.fabrication.frame import CONE_MM, build_frame, cone_diameter_mm, mask_frame, sliced_diameters
 from cpapfit.template import load_template
 from cpapfit.fabrication.vents import TARGET_CMH2O, TARGET_L_MIN
 

@@ -7,8 +7,7 @@ import pytest
 import trimesh
 
 from cpapfit.errors import InputError
-from cpapfit.ict import EXPRESSIONS, MULTIPIE_TO_FACEMESH, ict_face, load_ict, template_truth
-from cpapfit.ict.phantom import jaw_open_weight, random_subject
+from cpapfit.ict import EXPRESSIONS, MULTIPIE_TO_FACEMESH, ict_face, jaw_open_weight, load_ict, random_subject, template_truth
 from cpapfit.template import load_template
 
 FLOAT16_MM = 0.02  # the largest rounding error of a float16 mode (the model's modes are under 40 mm)

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.ict import ict_face, load_ict, template_on_ict
-from cpapfit.ict.phantom import LOWER_INNER_LIP, ict_head_mesh, make_ict_phantom, scene
+from cpapfit.ict import LOWER_INNER_LIP, ict_face, load_ict, template_on_ict
+from cpapfit.synthetic.ict_phantom import ict_head_mesh, make_ict_phantom, scene
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import phantom_files
 from cpapfit.landmarks.facemesh import detect
-from cpapfit.synthetic import to_camera
+from cpapfit.synthetic.camera import to_camera
 from cpapfit.render import raycast
 from cpapfit.rgbd import project
 from cpapfit.template import load_template

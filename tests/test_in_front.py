@@ -10,7 +10,8 @@ from cpapfit.errors import QualityError
 from cpapfit.quality.in_front import in_front_area_mm2
 from cpapfit.io.capture import load_capture
 from cpapfit.io.phantom import write_phantom
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import design
 from cpapfit.thresholds import QualityParams
 from cpapfit.template import load_template

@@ -21,10 +21,11 @@ from cpapfit.io.write import write_files
 from cpapfit.landmarks.cloud import facing_surface
 from cpapfit.align.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
-from cpapfit.metrics import mask_region, surface_distance
-from cpapfit.synthetic import KINECT_V1, make_phantom
+from cpapfit.synthetic.accuracy import surface_distance
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import KINECT_V1
 from cpapfit.scan import Intrinsics, Scan
-from cpapfit.template import central_face, load_template
+from cpapfit.template import central_face, load_template, mask_region
 from cpapfit.thresholds import QualityParams
 
 TEMPLATE = load_template()
@@ -399,7 +400,7 @@ def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
 def test_a_noisy_depth_camera_does_not_hide_the_face(tmp_path):
     """Synthetic subject 115 at 590 mm with depth noise σ 1 mm at 500 mm (1.4 mm there): the nose
     still stands > 9 mm out above the lip (with the probes' highest points, which rose with the noise: 7.3 mm)."""
-    from cpapfit.synthetic import SensorModel
+    from cpapfit.synthetic.camera import SensorModel
 
     ph = make_phantom(115, SensorModel(noise_mm_at_500=1.0))
     write_files(tmp_path, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
@@ -560,8 +561,8 @@ def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, 
 
     align = pipeline.align
 
-    def stray(scan, user=None):
-        al = align(scan, user)
+    def stray(scan, *args):
+        al = align(scan, *args)
         moved = scan.vertices[cKDTree(scan.vertices).query(al.landmarks.points + 15.0 * al.similarity.rotation[:, 0])[1]]
         return replace(al, landmarks=replace(al.landmarks, points=moved))
 

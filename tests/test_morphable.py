@@ -12,15 +12,15 @@ from cpapfit.align.morphable import fit_shape
 from cpapfit.align.nonrigid import NonrigidParams, vertex_normals
 from cpapfit.similarity import fit_similarity
 from cpapfit.ict import ict_face, load_ict, template_truth
-from cpapfit.ict.phantom import make_ict_phantom
+from cpapfit.synthetic.ict_phantom import make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.metrics import mask_region
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align, register_template, template_basis
 from cpapfit.scan import Scan
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)

@@ -12,7 +12,8 @@ from cpapfit.io.landmarks import landmarks_record, read_landmarks
 from cpapfit.io.phantom import write_phantom
 from cpapfit.landmarks.mouth import _gap_in_depth
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align, assessed, design, place_template
 from cpapfit.quality.gates import _mouth_gates
 from cpapfit.thresholds import QualityParams

@@ -13,12 +13,13 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.landmarks.types import Landmarks
-from cpapfit.metrics import flipped_triangles, mask_region, scan_to_template
-from cpapfit.synthetic import FRAMED, make_phantom
+from cpapfit.synthetic.accuracy import flipped_triangles, scan_to_template
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align
 from cpapfit.rgbd import project
 from cpapfit.scan import Scan
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)

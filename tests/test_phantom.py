@@ -8,7 +8,8 @@ import trimesh
 
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import phantom_files
-from cpapfit.synthetic import FRAMED, SensorModel, make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import FRAMED, SensorModel
 from cpapfit.template import load_template
 
 

@@ -26,7 +26,9 @@ from cpapfit.jobs import worker
 from cpapfit.work import at_once
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.synthetic import SensorModel, make_phantom, with_colour_shift, with_holes
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.camera import SensorModel
+from cpapfit.synthetic.defects import with_colour_shift, with_holes
 from cpapfit.evaluation.gap import RimGap
 from cpapfit.errors import QualityError
 from cpapfit.quality.proportions import proportions

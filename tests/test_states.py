@@ -9,8 +9,7 @@ from cpapfit.cushion.generic import template_cushion
 from cpapfit.cushion.solid import cushion_sheet
 from cpapfit.evaluation.fit import Face, FitParams, fit_cushion
 from cpapfit.evaluation.states import FaceState, fit_states, motions, moved, sleep_states, state_face
-from cpapfit.ict import LOWER_INNER_LIP, template_truth
-from cpapfit.ict.phantom import random_subject
+from cpapfit.ict import LOWER_INNER_LIP, random_subject, template_truth
 from cpapfit.pipeline import evaluated_cushions, face_for
 from cpapfit.template import load_template
 

@@ -10,12 +10,12 @@ from PIL import Image
 
 from cpapfit.errors import InputError
 from cpapfit.fusion import Frame, FusionParams, fuse
-from cpapfit.ict.sweep import make_ict_sweep
+from cpapfit.synthetic.ict_sweep import make_ict_sweep
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_sweep
-from cpapfit.metrics import mask_region, surface_distance
+from cpapfit.synthetic.accuracy import surface_distance
 from cpapfit.scan import Intrinsics
-from cpapfit.template import load_template
+from cpapfit.template import load_template, mask_region
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import numpy as np
 
 from cpapfit.io import load_scan
 from cpapfit.io.write import png_bytes, write_bytes
-from cpapfit.synthetic import make_phantom
+from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.pipeline import align, register_template
 from cpapfit.report.pictures import residual_picture, template_regions_picture
 from cpapfit.template import load_template

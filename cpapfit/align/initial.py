@@ -6,11 +6,11 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import InputError
-from ..metrics import mask_region
 from ..scan import Scan, robust_extent
-from ..template import Template, central_face
+from ..template import Template, central_face, mask_region
 from ..landmarks.detect import Detection, detect_from_front, detect_landmarks
 from ..landmarks.cloud import facing_surface
+from ..landmarks.noise import LandmarkNoise, with_noise
 from .fallback import fallback_alignment
 from ..landmarks.types import WITHOUT_COLOURS, Landmarks
 from .check import FaceCheck, check_face, require_face
@@ -23,12 +23,13 @@ from ..thresholds import FRONT_SIZE, DISAGREE_MM
 SECOND_LOOK = "a render of the depth" + WITHOUT_COLOURS
 
 
-def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None) -> tuple[Landmarks, Similarity, FaceCheck]:
+def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = None,
+                      noise: LandmarkNoise = LandmarkNoise()) -> tuple[Landmarks, Similarity, FaceCheck]:
     """Landmarks, the similarity carrying the template onto the scan, and the face check.
 
     User landmarks override detection. Otherwise the first of these that lies on a face wins: the
-    detection; for a mesh with colours, the detection on its renders without them (a texture
-    misplaced on the surface, or colours that are not skin, mislead the detector: when the coloured
+    detection (with `noise` on its landmarks, `with_noise`: none by default); for a mesh with
+    colours, the detection on its renders without them (a texture misplaced on the surface, or colours that are not skin, mislead the detector: when the coloured
     renders show no face, or one that fails the face check); a detection on a
     render from in front of the face the landmark-free fallback finds, if of that face's size
     (meshes, and point clouds through a surface over their points: a capture's own image is the
@@ -42,7 +43,7 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
         fit = fit_similarity(template.vertices[user.template_index], user.points)
         candidates = [("user", Detection(replace(user, confidence=fit.weights, path="user", note="user landmarks file"), fit, len(user.points)))]
     else:
-        candidates = _candidates(scan, template)
+        candidates = _candidates(scan, template, noise)
     found, check, failed, agreed = _first_face(scan, template, candidates, central)
     if not agreed:
         across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
@@ -117,14 +118,16 @@ def landmark_free_alignment(scan: Scan, template: Template, rejected: str) -> tu
     return (replace(landmarks, rejected=rejected), fit, check) if check.is_face else None
 
 
-def _candidates(scan: Scan, template: Template) -> Iterator[tuple[str, Detection]]:
-    """(label, alignment) to try in turn (each computed only if the one before fails the face check)."""
+def _candidates(scan: Scan, template: Template, noise: LandmarkNoise) -> Iterator[tuple[str, Detection]]:
+    """(label, alignment) to try in turn (each computed only if the one before fails the face check);
+    `noise` on the landmarks of the scan's detections (`detect_landmarks`), not on the frontal looks."""
     looks = [(scan, "")]
     if not (scan.is_capture or scan.is_point_cloud) and (scan.colors is not None or scan.texture is not None):
         looks.append((replace(scan, colors=None, texture=None, uv=None), WITHOUT_COLOURS))
     for seen, without in looks:
         det = detect_landmarks(seen, template)
         if det is not None:
+            det = with_noise(det, seen, template, noise)
             note = det.landmarks.note + (f"; on renders{without}" if without else "")
             yield det.landmarks.path + without, Detection(replace(det.landmarks, note=note), det.similarity, det.inliers)
             if scan.is_capture:

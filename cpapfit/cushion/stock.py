@@ -15,8 +15,7 @@ from functools import lru_cache
 import numpy as np
 import trimesh
 
-from ..ict import ict_face, load_ict, template_truth
-from ..ict.phantom import random_subject
+from ..ict import ict_face, load_ict, random_subject, template_truth
 from ..template import load_template
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion

@@ -72,6 +72,23 @@ def cone_diameter_mm(from_tip_mm):
     return CONE_TIP_MM + CONE_TAPER * np.asarray(from_tip_mm)
 
 
+def sliced_diameters(mesh, tip: np.ndarray, axis: np.ndarray, from_tip) -> np.ndarray:
+    """(K,) mm: the largest least-squares circle's diameter (Kasa's algebraic fit) of `mesh`'s section
+    across the unit `axis` at each distance (mm) of `from_tip` back from the point `tip`."""
+    out = []
+    for d in from_tip:
+        flat, _ = mesh.section(plane_origin=tip - d * axis, plane_normal=axis).to_2D()
+        out.append(max(_circle_diameter(np.asarray(loop)) for loop in flat.discrete))
+    return np.array(out)
+
+
+def _circle_diameter(points: np.ndarray) -> float:
+    """Diameter (mm) of the least-squares circle through (K, 2) points."""
+    a = np.column_stack([points, np.ones(len(points))])
+    cx, cy, c = np.linalg.lstsq(a, (points**2).sum(axis=1), rcond=None)[0]
+    return float(2.0 * np.sqrt(c + (cx**2 + cy**2) / 4.0))
+
+
 def mask_frame(cushion: Cushion) -> np.ndarray:
     """(4, 4) the mask's frame to the scan's: x across the face, y up, z the mask axis, origin the ring's centre."""
     axis = cushion.axis

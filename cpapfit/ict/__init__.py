@@ -9,6 +9,8 @@ expressions, both as float16 (largest rounding error 0.016 mm); `tools/build_ict
 the file. Frame: the template's (x to the subject's left, y up, z out of the face; mm): the model
 turned and moved rigidly, no scale, so that its landmarks lie best on the template's.
 
+`random_subject(rng)` draws a face (weights ~ N(0, 1) on every identity mode, the jaw opened as
+asked): the synthetic subjects' faces, and the population the stock cushions are sized over.
 `load_ict()` is the shipped model; `load_ict(path)` reads the original model file
 (`ict_face_model.npz`, as in ../shared/data/ict_face_model/) in full: all 100 identity modes and
 the same expressions, float64, turned into the same frame with the shipped rotation and
@@ -149,6 +151,26 @@ def ict_face(model: IctModel, identity_weights: np.ndarray, expression: dict[str
     for name, weight in expression.items():
         face = face + weight * model.expressions[model.expression_names.index(name)]
     return face
+
+
+def jaw_open_weight(mouth_open_mm: float, model: IctModel | None = None) -> float:
+    """The jawOpen weight that moves the lower inner lip's truth point `mouth_open_mm` (the model's
+    expressions add to any identity, so this is every face's; `model`: the shipped one if None)."""
+    model = load_ict() if model is None else model
+    move = template_truth(model.expressions[model.expression_names.index("jawOpen")])[LOWER_INNER_LIP]
+    return float(mouth_open_mm / np.linalg.norm(move))
+
+
+def random_subject(rng: np.random.Generator, mouth_open_mm: float, model: IctModel | None = None) -> tuple[np.ndarray, dict]:
+    """((V, 3) mm ICT vertices, template frame; identity record) of a random face of `model` (the
+    shipped one if None; weights ~ N(0, 1) on all its identity modes), jaw open as asked."""
+    model = load_ict() if model is None else model
+    weights = rng.normal(size=len(model.identity))
+    expression = {"jawOpen": jaw_open_weight(mouth_open_mm, model)} if mouth_open_mm > 0 else {}
+    identity = {"population": "ict", "ict_modes": len(model.identity), "ict_weights": weights.tolist(), "expression": expression}
+    if mouth_open_mm > 0:
+        identity["mouth_open_mm"] = float(mouth_open_mm)
+    return ict_face(model, weights, expression), identity
 
 
 @lru_cache(maxsize=1)

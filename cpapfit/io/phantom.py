@@ -7,8 +7,8 @@ import numpy as np
 import trimesh
 
 from .. import __version__
-from ..ict.phantom import HeadMesh
-from ..synthetic import Phantom
+from ..synthetic.ict_phantom import HeadMesh
+from ..synthetic.camera import Phantom
 from ..rgbd import project
 from ..template import N_LANDMARKS, load_template
 from .capture import capture_files

@@ -9,7 +9,7 @@ import numpy as np
 from ..similarity import Similarity
 from ..frozen import freeze_arrays
 from ..landmarks.views import View
-from ..synthetic import TEMPLATE_TO_CAMERA
+from ..template import TEMPLATE_TO_CAMERA
 from ..render import Scene, look, scene_of, shade
 from ..rgbd import project
 from ..scan import Intrinsics

@@ -10,10 +10,9 @@ from matplotlib.figure import Figure
 
 from ..similarity import Similarity
 from ..landmarks.types import Landmarks
-from ..synthetic import TEMPLATE_TO_CAMERA
 from ..render import raycast, scene_of, shade
 from ..scan import Intrinsics
-from ..template import Template
+from ..template import TEMPLATE_TO_CAMERA, Template
 from .draw import draw_dots, draw_loop
 from .figure import FONT, ColourScale, panels_png, png
 from .frame import GREY_SKIN, Face, Shot, around_seal, face_view, place_name, shoot, to_pixels, whole_face_view

@@ -19,6 +19,7 @@ from .regions import contact_region
 N_LANDMARKS = 468
 SUBDIVISIONS = 3  # Loop subdivision rounds: 468 -> 28 881 vertices
 MASKS = ("nasal", "oronasal")
+TEMPLATE_TO_CAMERA = np.diag([1.0, -1.0, -1.0])  # a face looking at the camera: y up -> down, z out -> towards it
 
 
 @dataclass(frozen=True)
@@ -77,3 +78,8 @@ def central_face(template: Template, radius_mm: float = 60.0) -> np.ndarray:
     """(K,) int64 indices of template vertices within radius_mm of the nose tip (landmark 4)."""
     v = template.vertices
     return np.flatnonzero(np.linalg.norm(v - v[4], axis=1) < radius_mm)
+
+
+def mask_region(template: Template) -> np.ndarray:
+    """(K,) sorted template vertex indices of both masks' contact bands."""
+    return np.union1d(template.regions["nasal"].band, template.regions["oronasal"].band)

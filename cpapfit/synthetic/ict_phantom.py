@@ -3,7 +3,7 @@
 `make_ict_phantom(seed)` draws an identity (weights ~ N(0, 1) on every identity mode of the model:
 the shipped 40 by default, or those of `model=load_ict(path)`, the full model), opens the jaw if asked, poses the whole head (face with its modelled nostril and lip insides, head, neck and
 eyeballs; an open mouth's back closed CAVITY_MM behind the lips) in front of the virtual depth
-camera of `cpapfit.synthetic` and renders its colour and depth images with the same sensor model.
+camera (`camera.py`) and renders its colour and depth images with the same sensor model.
 The truth is `template_truth` of the posed face: every template vertex where it lies on this face,
 in template vertex order, camera frame (mm), so every consumer of the template phantoms reads it.
 `ict_head_mesh(seed)` gives the same head as a mesh scan (mm, template frame, vertex colours),
@@ -19,14 +19,16 @@ from scipy.spatial import cKDTree
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
 from ..frozen import freeze_arrays
-from ..synthetic import (
-    ANY_POSE, BROW_SHADE, CAVITY_MM, IRIS, LIP_TINT, MOUTH_INSIDE, SCLERA, Phantom, PoseRange, SensorModel,
-    camera_image, face_regions, place_in_view, random_intrinsics, random_light, sensor_depth, skin_tone, to_camera,
+from .camera import (
+    ANY_POSE, Phantom, PoseRange, SensorModel, camera_image, place_in_view, random_intrinsics, random_light,
+    sensor_depth, to_camera,
 )
+from .skin import BROW_SHADE, IRIS, LIP_TINT, SCLERA, face_regions, skin_tone
+from .mouth import CAVITY_MM, MOUTH_INSIDE
 from ..render import raycast
 from ..rims import edge_uses
 from ..template import load_template
-from . import LOWER_INNER_LIP, IctModel, ict_face, load_ict, template_truth
+from ..ict import IctModel, load_ict, random_subject, template_truth
 
 VIEW_TILTS_DEG = (0.0, 30.0, 60.0)  # a frontal scanner's views: straight on, and 8 round at each other tilt
 VIEW_SPACING_MM = 0.4  # their rays' spacing
@@ -53,26 +55,6 @@ class HeadMesh:
 
     def __post_init__(self):
         freeze_arrays(self)
-
-
-def jaw_open_weight(mouth_open_mm: float, model: IctModel | None = None) -> float:
-    """The jawOpen weight that moves the lower inner lip's truth point `mouth_open_mm` (the model's
-    expressions add to any identity, so this is every face's; `model`: the shipped one if None)."""
-    model = load_ict() if model is None else model
-    move = template_truth(model.expressions[model.expression_names.index("jawOpen")])[LOWER_INNER_LIP]
-    return float(mouth_open_mm / np.linalg.norm(move))
-
-
-def random_subject(rng: np.random.Generator, mouth_open_mm: float, model: IctModel | None = None) -> tuple[np.ndarray, dict]:
-    """((V, 3) mm ICT vertices, template frame; identity record) of a random face of `model` (the
-    shipped one if None; weights ~ N(0, 1) on all its identity modes), jaw open as asked."""
-    model = load_ict() if model is None else model
-    weights = rng.normal(size=len(model.identity))
-    expression = {"jawOpen": jaw_open_weight(mouth_open_mm, model)} if mouth_open_mm > 0 else {}
-    identity = {"population": "ict", "ict_modes": len(model.identity), "ict_weights": weights.tolist(), "expression": expression}
-    if mouth_open_mm > 0:
-        identity["mouth_open_mm"] = float(mouth_open_mm)
-    return ict_face(model, weights, expression), identity
 
 
 @lru_cache(maxsize=1)
@@ -184,7 +166,7 @@ def make_ict_phantom(
     pose: PoseRange = ANY_POSE, mouth_open_mm: float = 0.0, model: IctModel | None = None,
 ) -> Phantom:
     """The ICT subject of `seed` as an RGB-D capture with its truth: same seed and model, same
-    arrays, bit for bit. `yaw_deg`, `distance_mm` and `pose` as for `cpapfit.synthetic.make_phantom`
+    arrays, bit for bit. `yaw_deg`, `distance_mm` and `pose` as for `template_phantom.make_phantom`
     (the same face whatever the pose); `mouth_open_mm` > 0 opens the jaw (the model's jawOpen) so
     that the lower inner lip moves that far (`jaw_open_weight`). `model`: the face model drawn from
     (`load_ict()` or `load_ict(path)`; the shipped one if None). The identity's first 40 weights

@@ -1,4 +1,4 @@
-"""Synthetic sweeps: one ICT subject seen by the depth camera of `cpapfit.synthetic` from a path
+"""Synthetic sweeps: one ICT subject seen by the virtual depth camera (`camera.py`) from a path
 round the face (yaw from -yaw_deg to +yaw_deg, a hand's jitter in pitch, roll and framing), each
 frame with its own sensor noise. Every frame's truth is the face in that frame's camera frame, so
 a fused sweep (in its first frame's camera frame) is measured against frame 0's truth.
@@ -7,13 +7,14 @@ a fused sweep (in its first frame's camera frame) is measured against frame 0's 
 import numpy as np
 
 from ..render import raycast
-from ..synthetic import (
+from .camera import (
     Phantom, PoseRange, SensorModel, camera_image, place_in_view, random_intrinsics, random_light, sensor_depth,
-    skin_tone, to_camera,
+    to_camera,
 )
+from .skin import skin_tone
 from ..template import load_template
-from .phantom import ict_albedo, random_subject, scene
-from . import template_truth
+from .ict_phantom import ict_albedo, scene
+from ..ict import random_subject, template_truth
 
 SWEEP_YAW_DEG = 35.0
 JITTER = PoseRange(yaw_deg=0.0, pitch_deg=3.0, roll_deg=2.0, off_centre=0.15)  # a hand-held camera's wobble

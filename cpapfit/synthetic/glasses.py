@@ -9,7 +9,7 @@ the subject's truth is the face under them.
 import numpy as np
 import trimesh
 
-from .template import Template
+from ..template import Template
 
 RIM_MM = (25.0, 17.0)  # half width, half height
 RIM_DROP_MM = 3.0  # the rims' middle below the eye corners' level
@@ -18,6 +18,7 @@ TUBE_MM = 1.2
 PAD_RADIUS_MM, PAD_THICK_MM, PAD_BELOW_NASION_MM, PAD_BESIDE_MM = 4.0, 1.5, 10.0, 8.0
 EYES = ((33, 133), (263, 362))  # outer and inner eye corners (Face Mesh), right then left
 NASION = 168
+FRAME = np.array([0.08, 0.07, 0.07])  # a glasses frame's albedo
 
 
 def glasses_mesh(face: np.ndarray, template: Template) -> trimesh.Trimesh:
