@@ -64,8 +64,11 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
         "tissue_model": params.tissue.describe(),
         "mechanics": {
             "model": "rigid mask on an elastic foundation; equilibrium of force along the mask axis and moments across it; "
-                     "contact band = seal flange width; gaps and indentations along the axis, pressures normal to the skin",
+                     "contact band = seal flange width; the skin's springs in series with the flange's, the flange a beam along the "
+                     "rim (EI = E w t^3 / 12) where flange_beam; gaps and indentations along the axis, pressures normal to the skin",
             "contact_width_mm": custom.contact_width_mm,
+            "flange_beam": params.flange_thickness_mm is not None,
+            "flange_rigidity_n_mm2": params.flange_rigidity_n_mm2(custom.contact_width_mm),
             "pressure_stats_over": "rim points over scanned skin (rim_covered_fraction of the rim); zero where not in contact",
         },
         "leak_model": {

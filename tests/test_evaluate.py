@@ -8,7 +8,7 @@ from scipy.spatial import Delaunay
 from cpapfit.errors import InputError
 from cpapfit.evaluation.fit import FitParams
 from cpapfit.evaluation.leak import leak_l_min
-from cpapfit.evaluation.mechanics import press
+from cpapfit.evaluation.mechanics import Flange, press
 from cpapfit.evaluation.rim import find_rim, _skin_below
 from cpapfit.evaluation.tissue import stiffness
 from cpapfit.template import load_template
@@ -16,6 +16,7 @@ from cpapfit.template import load_template
 RING_MM = 30.0  # radius of the flat test rim
 K = 256
 AREA = 5.0 * 2 * np.pi * RING_MM / K  # flange width x arc length per point, mm^2
+STEPS = np.full(K, 2 * np.pi * RING_MM / K)
 
 
 def ring_uv():
@@ -24,10 +25,10 @@ def ring_uv():
 
 
 def flat(clearance=None, k=1.0, force_n=10.0, cpap_kpa=0.0, uv=None):
-    """A flat rim on a flat face: K points, unit |cos|, uniform stiffness k (kPa/mm)."""
+    """A flat rim on a flat face: K points, unit |cos|, skin and flange springs both k (kPa/mm), no bending."""
     uv = ring_uv() if uv is None else uv
     clearance = np.zeros(K) if clearance is None else clearance
-    return press(clearance, np.ones(K), np.full(K, AREA), np.full(K, k), uv, np.pi * RING_MM**2, force_n, cpap_kpa)
+    return press(clearance, np.ones(K), np.full(K, AREA), np.full(K, k), uv, np.pi * RING_MM**2, force_n, cpap_kpa, Flange(k, 0.0, STEPS))
 
 
 def test_flat_rim_on_flat_face_presses_force_over_contact_area():
@@ -56,7 +57,7 @@ def test_moments_balance_on_an_uneven_face():
     rng = np.random.default_rng(3)
     uv, k = ring_uv(), rng.uniform(0.5, 3.0, K)
     clearance = rng.uniform(0.0, 1.0, K)
-    pressed = press(clearance, np.ones(K), np.full(K, AREA), k, uv, np.pi * RING_MM**2, 8.0, 0.0)
+    pressed = press(clearance, np.ones(K), np.full(K, AREA), k, uv, np.pi * RING_MM**2, 8.0, 0.0, Flange(1.0, 4.0, STEPS))
     load = pressed.pressure_kpa * AREA * 1e-3  # N at each point
     assert load.sum() == pytest.approx(8.0, rel=1e-6)
     assert np.abs(load @ (uv - uv.mean(axis=0))).max() < 1e-6 * 8.0 * RING_MM  # no net moment about the centre

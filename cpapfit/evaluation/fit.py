@@ -10,8 +10,9 @@ from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from ..template import load_template
+from .fe import SILICONE_KPA
 from .leak import leak_l_min
-from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, press
+from .mechanics import COS_MIN, N_PER_KPA_MM2, Flange, Pressed, press
 from .membrane import reach_mm
 from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
@@ -22,11 +23,20 @@ STEP_MM, NEAR_MM = 1.0, 3.0  # a correction moves a seal point at most this far,
 MMHG_PER_KPA = 7.50062
 
 
+def flange_rigidity(width_mm: float, thickness_mm: float) -> float:
+    """Bending rigidity EI (N mm^2) along the rim of a silicone seal flange `width_mm` wide and
+    `thickness_mm` thick: E w t^3 / 12, a strip bent through its thickness."""
+    return SILICONE_KPA * N_PER_KPA_MM2 * width_mm * thickness_mm**3 / 12.0
+
+
 @dataclass(frozen=True)
 class FitParams:
     """CPAP pressure (cmH2O); the safe window runs from the CPAP pressure plus `margin_kpa` up to
     the capillary closing pressure (`capillary_kpa`, 32 mmHg); `target_kpa`: the even rim pressure
-    the compensated cushion is designed for; `max_force_n`: highest headgear force searched."""
+    the compensated cushion is designed for; `max_force_n`: highest headgear force searched;
+    `flange_thickness_mm`: given (the cushion's wall, `CushionParams.wall_mm`), the silicone seal
+    flange bends along the rim as a beam that thick and as wide as the contact band; None (the
+    default: bench/RESULTS.md, section 17, says why): each rim point is its own spring."""
 
     cpap_cmh2o: float = 10.0
     margin_kpa: float = 0.2
@@ -34,6 +44,7 @@ class FitParams:
     target_kpa: float = 2.5
     max_force_n: float = 60.0
     tissue: TissueModel = field(default_factory=TissueModel)
+    flange_thickness_mm: float | None = None
 
     @property
     def cpap_kpa(self) -> float:
@@ -42,6 +53,10 @@ class FitParams:
     @property
     def window_kpa(self) -> tuple[float, float]:
         return self.cpap_kpa + self.margin_kpa, self.capillary_kpa
+
+    def flange_rigidity_n_mm2(self, width_mm: float) -> float:
+        """The seal flange's bending rigidity EI along the rim (N mm^2; 0 without `flange_thickness_mm`)."""
+        return 0.0 if self.flange_thickness_mm is None else flange_rigidity(width_mm, self.flange_thickness_mm)
 
     def describe(self) -> dict:
         lo, hi = self.window_kpa
@@ -106,10 +121,11 @@ class CushionFit:
         }
 
 
-def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float) -> Pressed:
-    """`press` over the covered points of a rim."""
-    c = rim.covered
-    return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa)
+def _press_rim(rim: RimContact, k: Stiffness, width_mm: float, force_n: float, params: FitParams, start: Pressed | None = None) -> Pressed:
+    """`press` of a rim (its covered points on the skin) with a seal flange `width_mm` wide, from `start`."""
+    flange = Flange(params.tissue.cushion_kpa_per_mm, params.flange_rigidity_n_mm2(width_mm),
+                    np.linalg.norm(np.roll(rim.points, -1, axis=0) - rim.points, axis=1))
+    return press(rim.clearance, rim.cos, width_mm * rim.ds, k.tissue, rim.uv, rim.sealed_area_mm2, force_n, params.cpap_kpa, flange, start)
 
 
 def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray:
@@ -121,19 +137,18 @@ def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray
     return np.maximum(pressed.opening_mm - reach_mm(rim.membrane_mm[c], rim.membrane_thickness_mm[c], cpap_kpa), 0.0)
 
 
-def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
-    """Least headgear force (N) at which no covered rim point is left open (bisection), or None."""
-
-    def opened(force: float) -> bool:
-        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa), rim, params.cpap_kpa).max() > 0
-
+def seal_force(rim: RimContact, k: Stiffness, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
+    """Least headgear force (N) at which no covered rim point is left open (bisection, each
+    equilibrium searched from the last), or None."""
     lo = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
     hi = params.max_force_n
-    if opened(hi):
+    pressed = _press_rim(rim, k, width_mm, hi, params)
+    if _left_open(pressed, rim, params.cpap_kpa).max() > 0:
         return None
     while hi - lo > tol_n:
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if opened(mid) else (lo, mid)
+        pressed = _press_rim(rim, k, width_mm, mid, params, pressed)
+        lo, hi = (mid, hi) if _left_open(pressed, rim, params.cpap_kpa).max() > 0 else (lo, mid)
     return hi
 
 
@@ -178,11 +193,11 @@ def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None,
     force (N) where already known (it does not depend on `force_n`), else found here."""
     k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
-    pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)
+    pressed = _press_rim(rim, k, width_mm, force, params)
     c = rim.covered
     opening = _left_open(pressed, rim, params.cpap_kpa)
     leak = leak_l_min(opening, rim.ds[c], width_mm, params.cpap_kpa)
-    sealing = seal_force(rim, k.effective, width_mm, params) if sealing is None else sealing
+    sealing = seal_force(rim, k, width_mm, params) if sealing is None else sealing
     full = [_spread(c, a) for a in (pressed.pressure_kpa, opening, leak)]
     return CushionFit(rim, k, *full, pressed, force, sealing, width_mm, params.window_kpa)
 
