@@ -15,8 +15,11 @@ leak). Per design: every state's leak, window fraction and peak pressure, predic
 With --stock, also the best stock size (`cpapfit.stock_fit`) seated on the true awake face as a clinic
 seats it and pressed in every state at its own headgear force.
 
+With --flange-beam, the fit model's seal flange bends along the rim as a beam as thick as the cushion's
+wall (`FitParams.flange_thickness_mm`), in the designs and in every evaluation.
+
 Usage: .venv/bin/python bench/sleep_states.py [--seeds 30] [--first 8000] [--workers 2] [--jaw ict|hinge]
-       [--rows rows.jsonl] [--model NPZ | --model shipped] [--stock]
+       [--rows rows.jsonl] [--model NPZ | --model shipped] [--stock] [--flange-beam]
 """
 
 import argparse
@@ -32,7 +35,8 @@ import trimesh
 
 from cpapfit import __version__
 from cpapfit.errors import CpapfitError
-from cpapfit.evaluation.fit import face_of, fit_rim
+from cpapfit.cushion.nurbs import CushionParams
+from cpapfit.evaluation.fit import FitParams, face_of, fit_rim
 from cpapfit.evaluation.rim import find_rim
 from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
 from cpapfit.ict import load_ict, template_truth
@@ -62,23 +66,24 @@ def head(seed: int, source: Path | None, mouth_open_mm: float, jaw: str):
     return trimesh.Trimesh(truth, template.faces, process=False), truth
 
 
-def run(job: tuple[int, Path | None, str, bool]) -> list[dict]:
+def run(job: tuple[int, Path | None, str, bool, bool]) -> list[dict]:
     """Both masks' designs of subject `seed` and their states, predicted and true."""
-    seed, source, jaw, stock = job
+    seed, source, jaw, stock, beam = job
     mesh, _ = head(seed, source, 0.0, jaw)
     scan = scan_of(mesh)
     try:
         placed = place_template(scan)
     except CpapfitError as exc:
         return [{"seed": seed, "mask": m, "outcome": "refused", "reason": str(exc)[:200]} for m in MASKS]
-    return [_measured(seed, mask, scan, placed, source, jaw, stock) for mask in MASKS]
+    fit_params = FitParams(flange_thickness_mm=CushionParams().wall_mm if beam else None)
+    return [_measured(seed, mask, scan, placed, source, jaw, stock, fit_params) for mask in MASKS]
 
 
-def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool) -> dict:
+def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool, fit_params: FitParams) -> dict:
     row = {"seed": seed, "mask": mask}
     t0 = time.perf_counter()
     try:
-        d = design(scan, mask, placement=placed)
+        d = design(scan, mask, fit_params=fit_params, placement=placed)
     except CpapfitError as exc:
         return {**row, "outcome": "refused", "reason": str(exc)[:200]}
     row["design_s"] = time.perf_counter() - t0
@@ -169,13 +174,14 @@ def main() -> None:
     ict_arguments(ap)
     ap.add_argument("--jaw", default="ict", choices=["ict", "hinge"], help="the true jaw: the ICT model's jawOpen, or the mandible hinged")
     ap.add_argument("--stock", action="store_true", help="also the best stock size fitted as a clinic fits it, at its own force")
+    ap.add_argument("--flange-beam", action="store_true", help="the seal flange bends along the rim as a beam (FitParams.flange_thickness_mm)")
     args = ap.parse_args()
     source = model_source(args)
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
           f"{args.first}-{args.first + args.seeds - 1} ({len(load_ict(source).identity)} identity modes), head meshes, "
-          f"true jaw: {args.jaw}; {args.workers} workers")
+          f"true jaw: {args.jaw}; flange beam: {args.flange_beam}; {args.workers} workers")
     rows, t0 = [], time.perf_counter()
-    jobs = [(seed, source, args.jaw, args.stock) for seed in range(args.first, args.first + args.seeds)]
+    jobs = [(seed, source, args.jaw, args.stock, args.flange_beam) for seed in range(args.first, args.first + args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         for done in pool.map(run, jobs):
             for row in done:
