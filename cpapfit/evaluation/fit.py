@@ -140,15 +140,19 @@ def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray
 def seal_force(rim: RimContact, k: Stiffness, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
     """Least headgear force (N) at which no covered rim point is left open (bisection, each
     equilibrium searched from the last), or None."""
+
+    def opened(pressed: Pressed) -> bool:
+        return _left_open(pressed, rim, params.cpap_kpa).max() > 0
+
     lo = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
     hi = params.max_force_n
     pressed = _press_rim(rim, k, width_mm, hi, params)
-    if _left_open(pressed, rim, params.cpap_kpa).max() > 0:
+    if opened(pressed):
         return None
     while hi - lo > tol_n:
         mid = 0.5 * (lo + hi)
         pressed = _press_rim(rim, k, width_mm, mid, params, pressed)
-        lo, hi = (mid, hi) if _left_open(pressed, rim, params.cpap_kpa).max() > 0 else (lo, mid)
+        lo, hi = (mid, hi) if opened(pressed) else (lo, mid)
     return hi
 
 

@@ -35,7 +35,7 @@ MAX_STEPS = 200  # Newton steps; each settles the contact set further (a handful
 
 @dataclass(frozen=True)
 class Flange:
-    """The seal flange along a closed rim of K points: spring_kpa_per_mm its give per unit contact
+    """The seal flange along a closed rim of K >= 5 points: spring_kpa_per_mm its give per unit contact
     area against the wall behind it; rigidity_n_mm2 its bending rigidity EI along the rim (0: each
     point on its own); step_mm (K,) distance from each rim point to the next."""
 
