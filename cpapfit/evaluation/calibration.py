@@ -98,7 +98,8 @@ def sealed_opening(flap: Flap, cpap_kpa: float, band_mm: float, spring: float = 
     `band_mm` on the skin (`spring` kPa/mm: rigid, or a tissue region's), and how far it lies with
     no opening. The pressure is raised at no opening, then the skin moved away step by step (the
     last solution the next one's start) until less lies; the opening is interpolated between the
-    last two steps (0 where it lies less than the band already)."""
+    last two steps (0 where it lies less than the band already; its width less the band, the most an
+    inextensible flap reaches, where it still lies that far)."""
     model = FlapModel(flap)
     opening, skin_y = 0.0, -flap.standoff_mm
     resting = flap.standoff_mm == 0.0 and flap.lift == 0.0  # on the skin already: it takes the pressure at once
@@ -107,6 +108,8 @@ def sealed_opening(flap: Flap, cpap_kpa: float, band_mm: float, spring: float = 
     if closed < band_mm:
         return 0.0, closed
     while lying >= band_mm:
+        if opening >= flap.width_mm - band_mm:
+            return flap.width_mm - band_mm, closed  # it hangs to the skin: no flap reaches further
         before = (opening, lying)
         opening += max(OPENING_STEP_MM, OPENING_GROWTH * opening)
         x = model.lowered(x, cpap_kpa, skin_y - before[0], skin_y - opening, spring)

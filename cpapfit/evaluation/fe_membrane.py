@@ -34,6 +34,10 @@ STEP_SHARE = 0.25  # a Newton step moves the flap at most this share of its widt
 RAMP = (0.01, 0.03, 0.1, 0.3, 1.0)  # the pressure's load steps, shares of it
 
 
+class NotConverged(RuntimeError):
+    """Newton's iterations did not converge within NEWTON_MAX."""
+
+
 @dataclass(frozen=True)
 class Flap:
     """A membrane section: width (root to free edge) and thickness, mm; its skin side at the root
@@ -175,17 +179,24 @@ class FlapModel:
             x += step * min(1.0, STEP_SHARE * self.flap.width_mm / np.abs(step).max())  # no step past the skin from afar
             if np.abs(step).max() < NEWTON_TOL_MM:
                 return x
-        raise RuntimeError("the flap's Newton iterations did not converge")
+        raise NotConverged("the flap's Newton iterations did not converge")
 
-    def lowered(self, x: np.ndarray, cpap_kpa: float, skin_from: float, skin_to: float, spring: float) -> np.ndarray:
+    def lowered(self, x: np.ndarray, cpap_kpa: float, skin_from: float, skin_to: float, spring: float, splits: int = 4) -> np.ndarray:
         """(dofs,) mm: the equilibrium once the skin moves from `skin_from` to `skin_to` (y, mm), from
         the solution `x` at `skin_from` with the part lying on the skin moved with it (so that Newton
-        starts with it in contact)."""
+        starts with it in contact); where Newton fails, the move is made in halves (`splits` times)."""
         lying = self.pressed(x, cpap_kpa, skin_from, spring).contact_kpa > 0
         start = x.copy()
         if lying.any():
             start[self.y_dofs[self.y_along >= self.along[lying].min()]] += skin_to - skin_from
-        return self.equilibrium(start, cpap_kpa, skin_to, spring)
+        try:
+            return self.equilibrium(start, cpap_kpa, skin_to, spring)
+        except NotConverged:
+            if splits == 0:
+                raise
+        middle = 0.5 * (skin_from + skin_to)
+        x = self.lowered(x, cpap_kpa, skin_from, middle, spring, splits - 1)
+        return self.lowered(x, cpap_kpa, middle, skin_to, spring, splits - 1)
 
     def pressed(self, x: np.ndarray, cpap_kpa: float, skin_y: float, spring: float) -> Pressed:
         """The solved flap at displacement `x`: its contact pressure and the root's reaction (the
