@@ -7,7 +7,7 @@ import pytest
 from cpapfit.evaluation.calibration import sealed_opening
 from cpapfit.evaluation.fe_checks import elastica_tip, flap_checks, laid_flap
 from cpapfit.evaluation.fe_membrane import Flap
-from cpapfit.evaluation.membrane import BAND_MM, LIFT, ROOT_MM, bending_stiffness, reach_mm
+from cpapfit.evaluation.membrane import BAND_MM, LARGE, LIFT, ROOT_MM, bending_stiffness, reach_mm
 
 D = bending_stiffness(0.5)  # kPa mm^3: the 0.5 mm flap
 
@@ -49,12 +49,14 @@ def test_the_membrane_law_is_the_flap_laid_on_the_skin_by_finite_elements():
     """A flat 5 mm, 0.5 mm flap (the stock width) at 4 cmH2O: the finite elements seal an opening
     of 0.06 mm (lying 2 mm on the skin), the plate laid on a plane a thickness sooner, P a^4 / (72 D)
     with a = w - 2 mm + t, within 0.02 mm; the law for the designed flap takes off its rest lift and
-    stand-off (nothing left), where a free cantilever's tip would reach 2.2 mm."""
+    stand-off (nothing left; an 8 mm flap's drop is short by LARGE drop / a, large deflection), where
+    a free cantilever's tip would reach 2.2 mm."""
     p = 4 * 0.0980665
     opening, lying = sealed_opening(Flap(5.0, 0.5, cells=(24, 2)), p, BAND_MM)
     a = 5.0 - BAND_MM + 0.5
     assert lying > 4.5
     assert opening == pytest.approx(p * a**4 / (72.0 * D), abs=0.02)
+    drop = p * 6.5**4 / (72.0 * D)
     assert reach_mm(np.array([5.0, 8.0]), np.array([0.5, 0.5]), p) == pytest.approx(
-        [0.0, p * 6.5**4 / (72.0 * D) - LIFT * 6.5 / 3.0 - ROOT_MM], abs=1e-9)
+        [0.0, drop * (1.0 - LARGE * drop / 6.5) - LIFT * 6.5 / 3.0 - ROOT_MM], abs=1e-9)
     assert p * 5.0**4 / (8.0 * D) > 2.2

@@ -9,14 +9,17 @@ pressure P still lays it BAND_MM along the skin. A plate clamped at its root, ra
 and laid on it by P, touches down tangent with no moment a = (72 D h / P)^(1/4) from its root (D =
 E t^3 / (12 (1 - nu^2)), E 1 MPa, nu 0.49); the finite elements of the flap (`fe_membrane.py`,
 geometrically nonlinear, `calibration.sealed_opening`, `bench/fe_calibration.py --membrane`) lay
-it down a thickness sooner (the touch-down's concentrated force spreads over about t), so with a =
-w - BAND_MM + t, and the designed flap's rest shape (its skin side ROOT_MM off the skin at the root
-with the wall touching, rising by LIFT away from it), the reach is
-    P a^4 / (72 D) - LIFT a / 3 - ROOT_MM,
-at least 0 and at most w - BAND_MM (an inextensible flap hanging to the skin): within 0.05 mm of
-the finite elements for 0.5 mm flaps 3-10 mm wide at 4-20 cmH2O. A 5 mm flap at 10 cmH2O closes
-nothing; a 10 mm one 4.8 mm. Where the wall is pushed off the face altogether (the CPAP load beats
-the headgear), nothing holds.
+it down a thickness sooner (the touch-down's concentrated force spreads over about t), and once
+the drop is a sizeable share of a (large deflection) short of the plate's, so with a =
+w - BAND_MM + t, the plate's drop d = P a^4 / (72 D), and the designed flap's rest shape (its skin
+side ROOT_MM off the skin at the root with the wall touching, rising by LIFT away from it), the
+reach is
+    d (1 - LARGE d / a) - LIFT a / 3 - ROOT_MM,
+at least 0 and at most w - BAND_MM (an inextensible flap hanging to the skin): within 0.11 mm of
+the finite elements for 0.5 mm flaps 3-10 mm wide at 4-20 cmH2O (LARGE = 0.22 fitted to them; a
+10 mm flap at 20 cmH2O hangs to the skin, where they do not converge). A 5 mm flap at 10 cmH2O
+closes nothing; a 10 mm one 4.1 mm. Where the wall is pushed off the face altogether (the CPAP load
+beats the headgear), nothing holds.
 
 The membrane is found on any closed cushion mesh by its thickness (`face_thickness_mm`): faces whose opposite
 side lies within MEMBRANE_MAX_MM inwards and faces back at them (a sheet's two sides, not the cap
@@ -37,6 +40,7 @@ SLAB_MM = 0.6  # a section across the rim takes in the membrane vertices this ne
 TANGENT_STEP = 4  # the rim's direction at a point: towards the point this many further on from the one as far back
 ROOT_MM = 0.15  # the designed flap's skin side stands this far off the skin at its root (`cushion.nurbs`)
 LIFT = 0.1  # and rises away from the skin by this slope at rest
+LARGE = 0.22  # large deflection: the drop falls short by this share of drop / a (fitted to the finite elements)
 RUN = 17  # a width holds only where it holds over this many rim points running (a grey opening)
 FACING = -0.8  # a sheet's other side: its normal and the face's meet at cos below this
 
@@ -75,20 +79,24 @@ def reach_mm(width_mm: np.ndarray, thickness: np.ndarray, cpap_kpa: float) -> np
     width = np.asarray(width_mm, dtype=float)
     thick = np.where(width > 0, thickness, 1.0)
     free = np.maximum(width - BAND_MM + thick, 0.0)  # a: from the root to where it lies
-    laid = cpap_kpa * free**4 / (72.0 * bending_stiffness(thick)) - LIFT * free / 3.0 - ROOT_MM
+    drop = cpap_kpa * free**4 / (72.0 * bending_stiffness(thick))
+    bent = np.minimum(drop / np.maximum(free, 1e-9), 0.5 / LARGE)  # drop / a, held where the law would turn back
+    laid = drop * (1.0 - LARGE * bent) - LIFT * free / 3.0 - ROOT_MM
     return np.where(width > 0, np.clip(laid, 0.0, np.maximum(width - BAND_MM, 0.0)), 0.0)
 
 
-def width_for(reach: np.ndarray, thickness_mm: float, cpap_kpa: float, iterations: int = 40) -> np.ndarray:
+def width_for(reach: np.ndarray, thickness_mm: float, cpap_kpa: float, tol_mm: float = 1e-9) -> np.ndarray:
     """(K,) mm: the narrowest flap `thickness_mm` thick whose `reach_mm` at `cpap_kpa` is `reach` (K,)
-    mm: a of the module docstring's law, by the fixed point a = (72 D (reach + ROOT_MM + LIFT a / 3)
-    / P)^(1/4) (a contraction), less the thickness, plus BAND_MM; at least reach + BAND_MM."""
-    need = np.asarray(reach, dtype=float) + ROOT_MM
-    scale = 72.0 * bending_stiffness(thickness_mm) / cpap_kpa
-    free = (scale * need) ** 0.25
-    for _ in range(iterations):
-        free = (scale * (need + LIFT * free / 3.0)) ** 0.25
-    return np.maximum(free - thickness_mm + BAND_MM, np.asarray(reach) + BAND_MM)
+    mm (bisection: the reach grows with the width), at least reach + BAND_MM."""
+    need = np.asarray(reach, dtype=float)
+    lo, hi = need + BAND_MM, need + BAND_MM
+    while (short := reach_mm(hi, np.full(need.shape, thickness_mm), cpap_kpa) < need).any():
+        hi = np.where(short, 2.0 * hi, hi)
+    while (hi - lo).max() > tol_mm:
+        mid = 0.5 * (lo + hi)
+        short = reach_mm(mid, np.full(need.shape, thickness_mm), cpap_kpa) < need
+        lo, hi = np.where(short, mid, lo), np.where(short, hi, mid)
+    return hi
 
 
 def rim_membrane(vertices: np.ndarray, thickness: np.ndarray, rim: np.ndarray, spread: int) -> tuple[np.ndarray, np.ndarray]:
