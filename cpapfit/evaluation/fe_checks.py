@@ -23,6 +23,7 @@ from skfem import MeshTri
 from .calibration import strip_stiffness
 from .fe import Material, dofs_where, graded, pressure_load, rigid_contact, solve_section, vector_basis
 from .fe_membrane import RIGID_KPA_PER_MM, Flap, FlapModel, Pressed, inflate
+from .membrane import bending_stiffness
 
 SILICONE = Material()
 
@@ -108,7 +109,7 @@ def flap_checks(cells: int = 48, width_mm: float = 6.0, thickness_mm: float = 0.
     """A flap (no skin) under a small pressure and under one of `bent` D / L^3 (a large deflection):
     its tip's deflection, mm, against the plate's and the elastica's."""
     model = FlapModel(Flap(width_mm, thickness_mm, cells=(cells, 2)))
-    rigidity = SILICONE.plane_strain_kpa * thickness_mm**3 / 12.0
+    rigidity = bending_stiffness(thickness_mm)
     small, large = 1e-4, bent * rigidity / width_mm**3
 
     def tip(pressure: float) -> float:
@@ -128,8 +129,8 @@ def laid_flap(cells: int = 24, width_mm: float = 8.0, thickness_mm: float = 0.5,
     levels = np.linspace(0.0, -raised_mm, steps + 1)
     for before, level in zip(levels[:-1], levels[1:]):
         x = model.lowered(x, pressure_kpa, before, level, RIGID_KPA_PER_MM)
-    rigidity = SILICONE.plane_strain_kpa * thickness_mm**3 / 12.0
-    return model.pressed(x, pressure_kpa, -raised_mm, RIGID_KPA_PER_MM), (72.0 * rigidity * raised_mm / pressure_kpa) ** 0.25
+    touchdown = (72.0 * bending_stiffness(thickness_mm) * raised_mm / pressure_kpa) ** 0.25
+    return model.pressed(x, pressure_kpa, -raised_mm, RIGID_KPA_PER_MM), touchdown
 
 
 def all_checks(fine: bool = False) -> tuple[Check, ...]:
