@@ -9,8 +9,14 @@
    full model, both masks, SECTIONS slices around each rim; frictionless and bonded to the skin
    (the two bounds of a flange that grips), beside the fast model's flange spring
    (`TissueModel.cushion_kpa_per_mm`), and what the two in series give.
+4. With --membrane, instead: the membrane (`cpapfit.evaluation.fe_membrane`, geometrically nonlinear):
+   for flaps of the cushions' thickness and widths at CPAP 4, 10 and 20 cmH2O, the largest seal
+   opening at which the flap still lies BAND_MM on the skin (`sealed_opening`), as designed (its
+   root's stand-off and rest lift) and flat, on a rigid skin and on the softest region's, beside the
+   fast model's `reach_mm`, the same law for a flat flap, and a free cantilever's tip deflection,
+   min(w - BAND_MM, P w^4 / (8 D)); nan where Newton's iterations fail.
 
-Usage: .venv/bin/python bench/fe_calibration.py [--seeds 6] [--first 8000] [--model NPZ | --model shipped]
+Usage: .venv/bin/python bench/fe_calibration.py [--seeds 6] [--first 8000] [--model NPZ | --model shipped] [--membrane [--widths MM ...]]
 """
 
 import argparse
@@ -24,7 +30,12 @@ import numpy as np
 from cpapfit import __version__
 from cpapfit.cushion.nurbs import CushionParams
 from cpapfit.errors import CpapfitError
-from cpapfit.evaluation.calibration import section_stiffness, strip_stiffness
+from cpapfit.cushion.nurbs import MEMBRANE_LIFT, MEMBRANE_ROOT_MM
+from cpapfit.cushion.stock import MEMBRANE_MM
+from cpapfit.evaluation.calibration import sealed_opening, section_stiffness, strip_stiffness
+from cpapfit.evaluation.fe_membrane import Flap, NotConverged
+from cpapfit.evaluation.fit import KPA_PER_CMH2O
+from cpapfit.evaluation.membrane import BAND_MM, bending_stiffness, reach_mm
 from cpapfit.evaluation.fe_checks import all_checks
 from cpapfit.evaluation.tissue import REGIONS, TissueModel
 from cpapfit.ict import load_ict
@@ -35,7 +46,10 @@ from cpapfit.template import MASKS
 
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 SECTIONS = 16
-WALL_MM, FLANGE_MM = CushionParams().wall_mm, CushionParams().flange_mm
+WALL_MM, FLANGE_MM, FLAP_MM = CushionParams().wall_mm, CushionParams().flange_mm, CushionParams().membrane_mm
+FLAP_WIDTHS_MM = (3.0, 4.0, MEMBRANE_MM, 6.0, 8.0, 10.0)  # the envelope's 4-10 mm, the stock 5 mm, a narrow one
+CPAP_CMH2O = (4.0, 10.0, 20.0)
+FLAP_CELLS = (48, 2)
 
 
 def profiles(seed: int, source: Path | None) -> dict[str, list[np.ndarray]]:
@@ -62,15 +76,52 @@ def profiles(seed: int, source: Path | None) -> dict[str, list[np.ndarray]]:
     return out
 
 
+def sealed_or_none(flap: Flap, cpap_kpa: float, spring: float | None = None) -> tuple[float, float]:
+    """`sealed_opening` on a rigid skin (None) or a soft one, (nan, nan) where Newton fails."""
+    try:
+        return sealed_opening(flap, cpap_kpa, BAND_MM) if spring is None else sealed_opening(flap, cpap_kpa, BAND_MM, spring)
+    except NotConverged:
+        return np.nan, np.nan
+
+
+def membrane_table(widths: tuple[float, ...]) -> None:
+    """The membrane's sealed opening by finite elements beside the fast model's reach (module docstring)."""
+    soft = min(REGIONS.values(), key=lambda r: r[2])
+    rigidity = bending_stiffness(FLAP_MM)
+    print(f"membrane {FLAP_MM:g} mm silicone (E 1 MPa, nu 0.49), mesh {FLAP_CELLS[0]} x {FLAP_CELLS[1]} quadratic triangles, "
+          f"band {BAND_MM:g} mm; designed: root {MEMBRANE_ROOT_MM[1]:g} mm off the skin, rest lift {MEMBRANE_LIFT:g}; "
+          f"soft skin {soft[2]:.2f} kPa/mm (the softest region's spring)\n")
+    print("| width (mm) | CPAP (cmH2O) | free cantilever | reach_mm | FE designed, rigid | law, flat flap | FE flat, rigid "
+          "| FE flat, soft | lies at no opening, designed (mm) |\n|---|---|---|---|---|---|---|---|---|")
+    for width in widths:
+        for cmh2o in CPAP_CMH2O:
+            p = cmh2o * KPA_PER_CMH2O
+            flat = Flap(width, FLAP_MM, cells=FLAP_CELLS)
+            designed = Flap(width, FLAP_MM, MEMBRANE_ROOT_MM[1], MEMBRANE_LIFT, FLAP_CELLS)
+            cantilever = min(width - BAND_MM, p * width**4 / (8.0 * rigidity))
+            laid_flat = min(p * (width - BAND_MM + FLAP_MM) ** 4 / (72.0 * rigidity), width - BAND_MM)
+            rigid, soft_g = sealed_or_none(flat, p)[0], sealed_or_none(flat, p, soft[2])[0]
+            lifted, lies = sealed_or_none(designed, p)
+            law = float(reach_mm(np.array([width]), np.array([FLAP_MM]), p)[0])
+            print(f"| {width:g} | {cmh2o:g} | {cantilever:.2f} | {law:.2f} | {lifted:.2f} | {laid_flat:.2f} | {rigid:.2f} | {soft_g:.2f} "
+                  f"| {lies:.2f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=6)
     ap.add_argument("--first", type=int, default=8000)
     ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped")
+    ap.add_argument("--membrane", action="store_true", help="the membrane's sealed opening instead")
+    ap.add_argument("--widths", type=float, nargs="+", default=FLAP_WIDTHS_MM, help="the membrane's widths, mm")
     args = ap.parse_args()
     source = None if str(args.model) == "shipped" else Path(args.model).resolve()
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}")
     t0 = time.perf_counter()
+    if args.membrane:
+        membrane_table(tuple(args.widths))
+        print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
+        return
     print("\n| case | computed | closed form | error |\n|---|---|---|---|")
     for c in all_checks(fine=True):
         print(f"| {c.name} | {c.computed:.4f} {c.unit} | {c.expected:.4f} {c.unit} | {100 * c.error:+.2f} % |")

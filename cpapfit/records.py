@@ -10,7 +10,7 @@ from .fabrication.draft import Draft
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
-from .evaluation.membrane import BAND_MM, MEMBRANE_MAX_MM
+from .evaluation.membrane import BAND_MM, LARGE, LIFT, MEMBRANE_MAX_MM, ROOT_MM
 from .evaluation.states import AWAKE
 from .fabrication.frame import BORE_MM, CONE_MM, CONE_TAPER, GAUGE_PLANE_MM, VALVE_MM, cone_diameter_mm
 from .io.landmarks import landmarks_record
@@ -75,9 +75,10 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
         },
         "membrane_model": {
             "model": "a flap thinner than the wall (found on the cushion mesh by its thickness) closes the seal opening at a rim "
-                     "point up to its reach: the lesser of its width less the sealing band and its cantilever deflection under "
-                     "the CPAP pressure, P w^4 / (8 D), D = E t^3 / (12 (1 - nu^2)); none where the mask lifts off",
-            "band_mm": BAND_MM, "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
+                     "point up to its reach, the largest opening at which the CPAP pressure still lays it band_mm on the skin: "
+                     "d (1 - large d / a) - lift a / 3 - root_mm, d = P a^4 / (72 D), a = w - band_mm + t, D = E t^3 / (12 (1 - nu^2)) "
+                     "(the clamped plate laid on the skin, fitted to finite elements), at most w - band_mm; none where the mask lifts off",
+            "band_mm": BAND_MM, "large": LARGE, "lift": LIFT, "root_mm": ROOT_MM, "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
         },
     }
 

@@ -13,13 +13,18 @@ from cpapfit.pipeline import evaluated_cushions, face_for
 P4 = 4 * 0.0980665  # kPa: the lowest CPAP pressure
 
 
-def test_a_flap_reaches_its_width_less_the_band_or_as_far_as_the_pressure_bends_it():
-    """Wide and thin: geometry limits (w - 2 mm). Narrow at 4 cmH2O: the cantilever P w^4 / 8D
-    (0.5 mm silicone, E 1 MPa, nu 0.49: D = 13.71 kPa mm^3; a 4 mm flap bends 0.915 mm). No flap, no reach."""
+def test_a_flap_reaches_as_far_as_the_pressure_lays_it_on_the_skin():
+    """The plate laid on the skin (a = w - 2 mm + t, D = 13.71 kPa mm^3 for 0.5 mm silicone, its drop
+    P a^4 / 72 D short by 0.22 drop / a): at 10 cmH2O a 0.5 mm flap 10 mm wide closes
+    5.19 (1 - 0.22 x 5.19 / 8.5) - 0.1 a / 3 - 0.15 = 4.06 mm, 5 mm wide nothing; at 40 cmH2O a 10 mm
+    flap its whole 8 mm less the band. No flap, no reach."""
     assert bending_stiffness(0.5) == pytest.approx(1000 * 0.125 / (12 * (1 - 0.49**2)))
-    got = reach_mm(np.array([10.0, 4.0, 0.0]), np.array([0.5, 0.5, 0.0]), P4)
-    assert got == pytest.approx([10.0 - BAND_MM, P4 * 4**4 / (8 * 13.7054), 0.0], abs=1e-3)
-    assert got[1] == pytest.approx(0.915, abs=0.002)
+    p10 = 10 * 0.0980665
+    drop = p10 * 8.5**4 / (72 * 13.7054)
+    got = reach_mm(np.array([10.0, 5.0, 0.0]), np.array([0.5, 0.5, 0.0]), p10)
+    assert got == pytest.approx([drop * (1 - 0.22 * drop / 8.5) - 0.1 * 8.5 / 3 - 0.15, 0.0, 0.0], abs=1e-3)
+    assert got[0] == pytest.approx(4.06, abs=0.01)
+    assert reach_mm(np.array([10.0]), np.array([0.5]), 4 * p10)[0] == 10.0 - BAND_MM
     need = np.array([0.5, 2.0, 5.0, 8.0])
     widths = width_for(need, 0.5, P4)
     assert reach_mm(widths, np.full(4, 0.5), P4) == pytest.approx(need, abs=1e-9)  # the narrowest flap that reaches
@@ -29,20 +34,21 @@ def test_a_flap_reaches_its_width_less_the_band_or_as_far_as_the_pressure_bends_
 def test_the_designed_membrane_is_found_on_the_cushion_as_wide_and_thick_as_designed(designed):
     """The written solid's thin part, measured section by section along its rim as `evaluate` does,
     against the flap's width designed there (seal curve to free edge): within 0.5 mm in the median,
-    nowhere 1 mm wider (the measure errs short where the rim turns), and 0.5 mm thick."""
+    nowhere 3 mm wider (the measure errs short where the rim turns; where flaps 10-13 mm wide meet
+    at the corners beside the nose, a section there reads some of a neighbour), and 0.5 mm thick."""
     _, d = designed
     rim = d.fits["custom"].rim
     seal, tip = d.cushion.grid(256, 2)[:, 0], d.cushion.membrane_grid(256, 8)[:, -1]
     near = np.argmin(np.linalg.norm(rim.points[:, None] - seal[None], axis=2), axis=1)
     error = rim.membrane_mm - np.linalg.norm(tip - seal, axis=1)[near]
-    assert abs(np.median(error)) < 0.5 and error.max() < 1.0
+    assert abs(np.median(error)) < 0.5 and error.max() < 3.0
     assert np.median(rim.membrane_thickness_mm) == pytest.approx(d.cushion.params.membrane_mm, abs=0.05)
     assert d.checks["membrane_min_mm"] >= 0.95 * d.cushion.params.membrane_mm
 
 
 def test_the_membrane_closes_the_opening_it_reaches_and_leaks_past_it(designed, placed_subjects):
-    """The custom cushion pushed 4 mm sideways: with no membrane its wall opens; a 6 mm flap (reach 4 mm
-    at 10 cmH2O) closes each opening by 4 mm (what is left leaks), and lowers the leak."""
+    """The custom cushion pushed 4 mm sideways: with no membrane its wall opens; a 10 mm flap (reach
+    4.06 mm at 10 cmH2O) closes each opening by its reach (what is left leaks), and lowers the leak."""
     ph, d = designed
     _, scan, _ = placed_subjects(ph.seed)
     face = face_for(scan, d.alignment, d.registration)
@@ -50,11 +56,12 @@ def test_the_membrane_closes_the_opening_it_reaches_and_leaks_past_it(designed, 
                         d.cushion.params.flange_mm, d.fits["custom"].force_n, d.fit_params)[0].fits["custom"]
     rim = pushed.rim
     bare = fit_rim(replace(rim, membrane_mm=np.zeros(len(rim.points))), face, 5.0, pushed.force_n, FitParams())
-    flap = fit_rim(replace(rim, membrane_mm=np.full(len(rim.points), 6.0), membrane_thickness_mm=np.full(len(rim.points), 0.5)),
+    flap = fit_rim(replace(rim, membrane_mm=np.full(len(rim.points), 10.0), membrane_thickness_mm=np.full(len(rim.points), 0.5)),
                    face, 5.0, pushed.force_n, FitParams())
     c = rim.covered
+    reach = reach_mm(np.array([10.0]), np.array([0.5]), FitParams().cpap_kpa)[0]
     assert bare.opening_mm[c].max() > 0.5
-    assert flap.opening_mm[c] == pytest.approx(np.maximum(bare.opening_mm[c] - 4.0, 0.0), abs=1e-9)
+    assert flap.opening_mm[c] == pytest.approx(np.maximum(bare.opening_mm[c] - reach, 0.0), abs=1e-9)
     assert flap.leak_l_min[c].sum() < bare.leak_l_min[c].sum()
 
 

@@ -19,6 +19,7 @@ from geomdl import NURBS, helpers
 from scipy.ndimage import gaussian_filter1d
 
 from .contact import Contact, closed_resample
+from ..evaluation.membrane import LIFT, ROOT_MM
 from ..frozen import freeze_arrays
 
 AROUND, ROWS, DEGREE = 32, 8, 3
@@ -30,8 +31,8 @@ WALL_STEPS = (0.12, 0.32, 0.62, 1.0)  # the wall's rows along its curve: close t
 WALL_SMOOTHING = 1.0  # periodic Gaussian (in control columns) on the wall rows: no tight corners around the wall
 FRAME_RING_MM = {"nasal": (48.0, 46.0), "oronasal": (86.0, 98.0)}  # (width, height) of the frame ring
 MEMBRANE_ROWS = 4  # root, two inner rows, free edge: one cubic Bezier across the flap
-MEMBRANE_ROOT_MM = (1.0, 0.15)  # the flap's root inside the flange: outwards along the skin, up off it
-MEMBRANE_LIFT = 0.1  # at rest the free edge stands this share of the flap's width off the skin plane
+MEMBRANE_ROOT_MM = (1.0, ROOT_MM)  # the flap's root inside the flange: outwards along the skin, up off it
+MEMBRANE_LIFT = LIFT  # at rest the free edge stands this share of the flap's width off the skin plane (the reach's law takes both)
 FLAP_SMOOTHING = 1.5  # periodic Gaussian (in control columns) on the flaps' directions: fanned, not square, at a tight bend
 
 

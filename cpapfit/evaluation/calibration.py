@@ -17,8 +17,10 @@ import numpy as np
 from skfem import MeshTri
 
 from .fe import Material, dofs_where, graded, rigid_contact, solve_section, vector_basis
+from .fe_membrane import RAMP, RIGID_KPA_PER_MM, Flap, FlapModel, inflate
 
 TISSUE_POISSON = 0.49
+OPENING_STEP_MM, OPENING_GROWTH = 0.02, 0.2  # the skin moves away by the larger of these (mm, share of the opening) a step
 SIDE_WIDTHS = 8.0  # the tissue slab reaches this many strip widths (or layer depths) beside the strip
 
 
@@ -89,3 +91,27 @@ def section_stiffness(profile: np.ndarray, thickness_mm: float, contact_mm: floa
     approach = travel_mm * np.cos(tilt)
     section = rigid_contact(turned, material, fixed, face, level * np.cos(tilt) - y - approach)
     return float(-section.reaction[face].sum() * np.cos(tilt) / (contact_mm * travel_mm))
+
+
+def sealed_opening(flap: Flap, cpap_kpa: float, band_mm: float, spring: float = RIGID_KPA_PER_MM) -> tuple[float, float]:
+    """(mm, mm): the largest seal opening at which the `flap`, inflated by `cpap_kpa`, still lies
+    `band_mm` on the skin (`spring` kPa/mm: rigid, or a tissue region's), and how far it lies with
+    no opening. The pressure is raised at no opening, then the skin moved away step by step (the
+    last solution the next one's start) until less lies; the opening is interpolated between the
+    last two steps (0 where it lies less than the band already; its width less the band, the most an
+    inextensible flap reaches, where it still lies that far)."""
+    model = FlapModel(flap)
+    opening, skin_y = 0.0, -flap.standoff_mm
+    resting = flap.standoff_mm == 0.0 and flap.lift == 0.0  # on the skin already: it takes the pressure at once
+    x = inflate(model, cpap_kpa, skin_y, spring, (1.0,) if resting else RAMP)
+    lying = closed = model.pressed(x, cpap_kpa, skin_y, spring).lying_mm(cpap_kpa)
+    if closed < band_mm:
+        return 0.0, closed
+    while lying >= band_mm:
+        if opening >= flap.width_mm - band_mm:
+            return flap.width_mm - band_mm, closed  # it hangs to the skin: no flap reaches further
+        before = (opening, lying)
+        opening += max(OPENING_STEP_MM, OPENING_GROWTH * opening)
+        x = model.lowered(x, cpap_kpa, skin_y - before[0], skin_y - opening, spring)
+        lying = model.pressed(x, cpap_kpa, skin_y - opening, spring).lying_mm(cpap_kpa)
+    return float(np.interp(band_mm, [lying, before[1]], [opening, before[0]])), closed

@@ -2,15 +2,24 @@
 
 A stock cushion seals with a membrane, not with its wall: where the wall lifts off the skin (the
 jaw drops, a pillow pushes the mask), the pressure in the mask pushes the flap down onto the skin,
-and the seal holds while the flap reaches. Here a flap of width w (mm, from its root at the wall's
-contact line to its free edge) and thickness t closes a seal opening (normal to the skin) up to its
-reach, the lesser of
-- its geometry: the flap hangs from its root to the skin and must still lie BAND_MM on it to seal
-  (an inextensible flap: w - BAND_MM), and
-- its bending: a cantilever of length w under the CPAP pressure P deflects P w^4 / (8 D), with
-  D = E t^3 / (12 (1 - nu^2)) the plate's bending stiffness (linear plate theory, the same D the
-  finite-element plate check confirms); a flap too stiff for the pressure is not laid down.
-Where the wall is pushed off the face altogether (the CPAP load beats the headgear), nothing holds.
+and the seal holds while the flap still lies on it. Here a flap of width w (mm, from its root at the
+wall's contact line to its free edge) and thickness t, held at its root by the far stiffer wall,
+closes a seal opening g (normal to the skin) up to its reach: the largest opening at which the CPAP
+pressure P still lays it BAND_MM along the skin. A plate clamped at its root, raised h over a plane
+and laid on it by P, touches down tangent with no moment a = (72 D h / P)^(1/4) from its root (D =
+E t^3 / (12 (1 - nu^2)), E 1 MPa, nu 0.49); the finite elements of the flap (`fe_membrane.py`,
+geometrically nonlinear, `calibration.sealed_opening`, `bench/fe_calibration.py --membrane`) lay
+it down a thickness sooner (the touch-down's concentrated force spreads over about t), and once
+the drop is a sizeable share of a (large deflection) short of the plate's, so with a =
+w - BAND_MM + t, the plate's drop d = P a^4 / (72 D), and the designed flap's rest shape (its skin
+side ROOT_MM off the skin at the root with the wall touching, rising by LIFT away from it), the
+reach is
+    d (1 - LARGE d / a) - LIFT a / 3 - ROOT_MM,
+at least 0 and at most w - BAND_MM (an inextensible flap hanging to the skin): within 0.11 mm of
+the finite elements for 0.5 mm flaps 3-10 mm wide at 4-20 cmH2O (LARGE = 0.22 fitted to them; a
+10 mm flap at 20 cmH2O hangs to the skin, where they do not converge). A 5 mm flap at 10 cmH2O
+closes nothing; a 10 mm one 4.1 mm. Where the wall is pushed off the face altogether (the CPAP load
+beats the headgear), nothing holds.
 
 The membrane is found on any closed cushion mesh by its thickness (`face_thickness_mm`): faces whose opposite
 side lies within MEMBRANE_MAX_MM inwards and faces back at them (a sheet's two sides, not the cap
@@ -29,6 +38,9 @@ MEMBRANE_MAX_MM = 1.0  # thinner than this: membrane, not wall
 INSIDE_MM = 1e-3  # rays start this far inside a face, so they do not meet it
 SLAB_MM = 0.6  # a section across the rim takes in the membrane vertices this near its plane (they are <= 1 mm apart)
 TANGENT_STEP = 4  # the rim's direction at a point: towards the point this many further on from the one as far back
+ROOT_MM = 0.15  # the designed flap's skin side stands this far off the skin at its root (`cushion.nurbs`)
+LIFT = 0.1  # and rises away from the skin by this slope at rest
+LARGE = 0.22  # large deflection: the drop falls short by this share of drop / a (fitted to the finite elements)
 RUN = 17  # a width holds only where it holds over this many rim points running (a grey opening)
 FACING = -0.8  # a sheet's other side: its normal and the face's meet at cos below this
 
@@ -61,18 +73,30 @@ def bending_stiffness(thickness: np.ndarray, youngs_kpa: float = SILICONE_KPA, p
 
 
 def reach_mm(width_mm: np.ndarray, thickness: np.ndarray, cpap_kpa: float) -> np.ndarray:
-    """(K,) mm of seal opening the membrane closes at each rim point: the lesser of its geometric
-    reach (width - BAND_MM) and its deflection under the CPAP pressure as a cantilever (0 where there
-    is no membrane: width 0)."""
+    """(K,) mm of seal opening the membrane closes at each rim point: the largest opening at which
+    the CPAP pressure `cpap_kpa` still lays a flap of (K,) `width_mm` and `thickness` mm BAND_MM on
+    the skin (module docstring; 0 where there is no membrane: width 0)."""
     width = np.asarray(width_mm, dtype=float)
-    stiff = bending_stiffness(np.where(width > 0, thickness, 1.0))
-    return np.where(width > 0, np.minimum(np.maximum(width - BAND_MM, 0.0), cpap_kpa * width**4 / (8.0 * stiff)), 0.0)
+    thick = np.where(width > 0, thickness, 1.0)
+    free = np.maximum(width - BAND_MM + thick, 0.0)  # a: from the root to where it lies
+    drop = cpap_kpa * free**4 / (72.0 * bending_stiffness(thick))
+    bent = np.minimum(drop / np.maximum(free, 1e-9), 0.5 / LARGE)  # drop / a, held where the law would turn back
+    laid = drop * (1.0 - LARGE * bent) - LIFT * free / 3.0 - ROOT_MM
+    return np.where(width > 0, np.clip(laid, 0.0, np.maximum(width - BAND_MM, 0.0)), 0.0)
 
 
-def width_for(reach: np.ndarray, thickness_mm: float, cpap_kpa: float) -> np.ndarray:
-    """(K,) mm: the narrowest flap `thickness_mm` thick whose `reach_mm` at `cpap_kpa` is `reach` (K,) mm."""
-    bending = (8.0 * bending_stiffness(thickness_mm) * np.asarray(reach) / cpap_kpa) ** 0.25
-    return np.maximum(np.asarray(reach) + BAND_MM, bending)
+def width_for(reach: np.ndarray, thickness_mm: float, cpap_kpa: float, tol_mm: float = 1e-9) -> np.ndarray:
+    """(K,) mm: the narrowest flap `thickness_mm` thick whose `reach_mm` at `cpap_kpa` is `reach` (K,)
+    mm (bisection: the reach grows with the width), at least reach + BAND_MM."""
+    need = np.asarray(reach, dtype=float)
+    lo, hi = need + BAND_MM, need + BAND_MM
+    while (short := reach_mm(hi, np.full(need.shape, thickness_mm), cpap_kpa) < need).any():
+        hi = np.where(short, 2.0 * hi, hi)
+    while (hi - lo).max() > tol_mm:
+        mid = 0.5 * (lo + hi)
+        short = reach_mm(mid, np.full(need.shape, thickness_mm), cpap_kpa) < need
+        lo, hi = np.where(short, mid, lo), np.where(short, hi, mid)
+    return hi
 
 
 def rim_membrane(vertices: np.ndarray, thickness: np.ndarray, rim: np.ndarray, spread: int) -> tuple[np.ndarray, np.ndarray]:
