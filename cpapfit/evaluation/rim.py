@@ -109,7 +109,7 @@ def rim_zone(cushion: trimesh.Trimesh, axis: np.ndarray, up: np.ndarray, thickne
     fine, thickness = refined(cushion) if thickness is None else (cushion, thickness)
     vertices = np.asarray(fine.vertices)
     centre = vertices.mean(axis=0)
-    sector = _sector(vertices - centre, axis, up, sectors)
+    sector = _sector((vertices - centre) @ in_plane(axis, up).T, sectors)
     wall = thickness > MEMBRANE_MAX_MM
     low = _lowest(vertices @ axis, sector, wall, sectors)
     turn = int(np.ceil(abs(turn_deg) / 360.0 * sectors))
@@ -142,7 +142,7 @@ def rim_in(
     vertices = zone.wall
     plane = in_plane(axis, up)
     uv = (vertices - zone.centre) @ plane.T
-    sector = _sector(vertices - zone.centre, axis, up, sectors)
+    sector = _sector(uv, sectors)
     near = _rim_band(vertices @ axis, sector, sectors)
     on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
     on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
@@ -166,9 +166,8 @@ def rim_in(
     return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
-def _sector(offset: np.ndarray, axis: np.ndarray, up: np.ndarray, sectors: int) -> np.ndarray:
-    """(V,) the sector (of `sectors` equal angles about the axis) of each (V, 3) mm `offset` from the centre."""
-    uv = offset @ in_plane(axis, up).T
+def _sector(uv: np.ndarray, sectors: int) -> np.ndarray:
+    """(V,) the sector (of `sectors` equal angles about the axis) of each (V, 2) mm position across it from the centre."""
     return np.minimum((np.arctan2(uv[:, 1], uv[:, 0]) + np.pi) / (2 * np.pi) * sectors, sectors - 1).astype(int)
 
 
