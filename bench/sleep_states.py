@@ -24,7 +24,6 @@ import json
 import platform
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +33,7 @@ from cpapfit import __version__
 from cpapfit.errors import CpapfitError
 from cpapfit.evaluation.fit import face_of, fit_rim
 from cpapfit.evaluation.rim import find_rim
-from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face
+from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face, state_params
 from cpapfit.ict import load_ict, random_subject, template_truth
 from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.synthetic.mouth import open_mouth
@@ -97,7 +96,7 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool)
             surface, truth = head(seed, source, state.mouth_open_mm, jaw)
             on = face_of(surface, truth, d.cushion.axis, d.cushion.up)
             faces[key] = state_face(on, motions(truth).supine) if state.supine else on
-        params = d.fit_params if state.cpap_cmh2o is None else replace(d.fit_params, cpap_cmh2o=state.cpap_cmh2o)
+        params = state_params(state, d.fit_params)
         on = faces[key]
         try:
             true = {n: fit_rim(find_rim(moved(m, on, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up,

@@ -18,12 +18,11 @@ from .align.nonrigid import NonrigidParams
 from .cushion.nurbs import CushionParams
 from .errors import InputError
 from .evaluation.fit import FitParams
-from .evaluation.states import fit_states, sleep_states
 from .io import load_scan
 from .io.landmarks import user_landmarks
 from .io.phantom import write_phantom
 from .outputs import design_files, report_files
-from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template
+from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template, pressed_asleep
 from .pipeline import design as designed
 from .jobs import ScanTask, save_folder
 from .landmarks.noise import LandmarkNoise
@@ -103,21 +102,22 @@ def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False
              states: bool = False, force_n: float | None = None, landmarks: str | Path | None = None,
              params: Params = Params(), cushion_file: str = "") -> dict:
     """`cpapfit evaluate`: a cushion mesh (trimesh, mm, the scan's frame; from `cushion_file`) pressed
-    onto the scan at `force_n` N (None: its recommended force); with `mask`, the `generic` cushion at
-    the same force, a `stock` cushion (a size, "gauge" or "best") fitted as a clinic fits it, and with
-    `states` every state of the sleeping face. The fit.json record."""
+    onto the scan at `force_n` N (None: its recommended force, or with `states` the force set for
+    them, `headgear_force`); with `mask`, the `generic` cushion at the same force, a `stock` cushion
+    (a size, "gauge" or "best") fitted as a clinic fits it, and with `states` every state of the
+    sleeping face. The fit.json record."""
     if (generic or stock or states) and not mask:
         raise InputError("generic, stock and states need the mask (nasal or oronasal): which cushion to compare with, which states to press")
     placed = place_template(scan, user_landmarks(landmarks, scan), params=params.registration, quality=params.quality,
                             landmark_noise=params.landmark_noise)
     face = face_for(scan, placed.alignment, placed.registration)
     cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
-    fits = evaluated(face, cushions, params.cushion, params.fit, force_n)
+    if states:
+        fits, pressed = pressed_asleep(face, cushions, mask, params.cushion, params.fit, force_n)
+    else:
+        fits, pressed = evaluated(face, cushions, params.cushion, params.fit, force_n), None
     compared = compared_stock(mask, face, stock, params.cushion, params.fit, asleep=states) if stock else None
     fits |= compared.fits if compared else {}
-    pressed = None
-    if states:
-        pressed = fit_states(cushions, face, sleep_states(mask), params.cushion.flange_mm, fits["custom"].force_n, params.fit, fits)
-        pressed = compared.beside(pressed) if compared else pressed
+    pressed = compared.beside(pressed) if compared and pressed else pressed
     return evaluate_record(scan, cushion_file, fits, params.fit, compared, pressed)
 

@@ -17,10 +17,10 @@ from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet
 from .cushion.generic import NOSE_TIP, place, template_cushion
 from .cushion.compensation import Preload, compensated_cushion
-from .cushion.envelope import enveloped_cushion
-from .evaluation.fit import CushionFit, Face, FitParams, face_of, fit_cushion
+from .cushion.envelope import enveloped_cushion, headgear_force
+from .evaluation.fit import CushionFit, Face, FitParams, at_force, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
-from .evaluation.states import StateFit, fit_states, sleep_states
+from .evaluation.states import StateFit, fit_states, sleep_states, state_params
 from .fabrication.dead_space import dead_space_ml, ring_clearance
 from .fabrication.files import SolidError, check_closed, check_solid
 from .fabrication.frame import Frame, build_frame
@@ -211,8 +211,7 @@ def design(
     moulded = mould(cushion, solid)
     frame = build_frame(cushion, solid)
     frame_checks = check_closed(frame.mesh, "the frame")
-    fits = evaluate(face, {"custom": solid}, params, fit_params)
-    states = fit_states({"custom": solid}, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
+    fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params)
     compared = None
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
@@ -273,6 +272,23 @@ def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
     """The face cushions are pressed onto: the scan, its registered template, the mask axis (the
     template's +z carried by the similarity) and the head's up direction (its +y)."""
     return face_of(scan_surface(scan), reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
+
+
+def pressed_asleep(
+    face: Face, cushions: dict[str, trimesh.Trimesh], mask: str, params: CushionParams = CushionParams(),
+    fit_params: FitParams = FitParams(), force_n: float | None = None,
+) -> tuple[dict[str, CushionFit], tuple[StateFit, ...]]:
+    """The `evaluated_cushions` pressed onto the face awake (`evaluate`) and in each sleep state of
+    a `mask`, all at one headgear force: `force_n`, or the custom cushion's set for the states
+    (`headgear_force`)."""
+    fits = evaluate(face, cushions, params, fit_params, force_n)
+    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
+    force = fits["custom"].force_n if force_n is not None else headgear_force(fits["custom"], states, fit_params)
+    if force == fits["custom"].force_n:
+        return fits, states
+    return ({name: at_force(fit, force, fit_params) for name, fit in fits.items()},
+            tuple(replace(s, fits={name: at_force(fit, force, state_params(s.state, fit_params)) for name, fit in s.fits.items()})
+                  for s in states))
 
 
 def evaluated_cushions(

@@ -7,6 +7,7 @@ import numpy as np
 from . import __version__
 from .fabrication.dead_space import CUSHION_SHARE
 from .fabrication.draft import Draft
+from .cushion.envelope import PEAK_MARGIN_KPA
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
@@ -50,14 +51,17 @@ def _left(d: Draft) -> str:
 
 
 def evaluation_record(fits: dict, params: FitParams) -> dict:
-    """The evaluate stage's part of fit.json: the custom cushion at its recommended headgear force,
+    """The evaluate stage's part of fit.json: the custom cushion at its headgear force,
     each other cushion (generic, stock) at its own (its `headgear_force_n`)."""
     custom = fits["custom"]
     return {
         "cpap_cmh2o": params.cpap_cmh2o,
         "headgear_force_n": round(custom.force_n, 3),
-        "headgear_force_about": "recommended: the force at which a cushion compensated for this face presses every covered rim "
-                                "point with the target pressure while balancing the CPAP load; the custom cushion is evaluated at it, "
+        "headgear_force_about": "the custom cushion's: the force asked for (evaluate --force), else the recommended force (at "
+                                "which a cushion compensated for this face presses every covered rim point with the target pressure "
+                                "while balancing the CPAP load), raised where the sleep states are pressed (design, evaluate --states) "
+                                "to the least force that seals the awake face and each state at this CPAP pressure, and held where "
+                                f"the awake peak comes {PEAK_MARGIN_KPA:g} kPa under capillary closing (cpapfit.cushion.envelope); "
                                 "a stock cushion at the force a clinic sets for it (stock_fitting)",
         "window": params.describe(),
         **{name: fit.summary() for name, fit in fits.items()},

@@ -7,7 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.cushion.generic import template_cushion
 from cpapfit.cushion.solid import cushion_sheet
-from cpapfit.evaluation.fit import Face, FitParams, fit_cushion
+from cpapfit.cushion.envelope import PEAK_MARGIN_KPA
+from cpapfit.evaluation.fit import Face, FitParams, fit_cushion, recommended_force
 from cpapfit.evaluation.states import FaceState, fit_states, motions, moved, sleep_states, state_face
 from cpapfit.ict import LOWER_INNER_LIP, random_subject, template_truth
 from cpapfit.pipeline import evaluated_cushions, face_for
@@ -120,6 +121,22 @@ def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, place
     fit = fit_states(evaluated_cushions(d.alignment, d.solid, None), face, (far,), d.cushion.params.flange_mm,
                      d.fits["custom"].force_n, d.fit_params)[0]
     assert fit.fits["custom"].summary()["leak_l_min"] > 5.0
+
+
+def test_the_headgear_force_seals_the_states_it_can_within_the_awake_peak_limit(designed):
+    """The custom cushion's force: at most where the awake peak comes PEAK_MARGIN_KPA under capillary
+    closing; short of that, at least the recommended force and every seal force of the states at
+    the awake pressure (each of those states then sealed)."""
+    _, d = designed
+    awake, params = d.fits["custom"], d.fit_params
+    limit = params.capillary_kpa - PEAK_MARGIN_KPA
+    assert awake.summary()["pressure_max_kpa"] <= limit + 0.01
+    if awake.summary()["pressure_max_kpa"] < limit - 0.05:  # not held by the peak
+        assert awake.force_n >= recommended_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params) - 1e-9
+        for s in d.states:
+            if s.state.cpap_cmh2o is None:
+                assert s.fits["custom"].seal_force_n is not None and s.fits["custom"].seal_force_n <= awake.force_n + 1e-9, s.state.name
+                assert s.fits["custom"].summary()["leak_l_min"] == 0.0, s.state.name
 
 
 def test_the_design_line_says_in_how_many_states_each_cushion_leaks():

@@ -23,7 +23,7 @@ from .contact import Contact, closed_resample
 from .generic import NOSE_TIP
 from .nurbs import AROUND, Cushion, design_cushion, flap_directions
 from .solid import with_membrane
-from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams
+from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_force
 from ..evaluation.membrane import width_for
 from ..evaluation.rim import SECTORS
 from ..solids import self_intersecting_edges
@@ -34,6 +34,7 @@ REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's sl
 WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
 INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
 SHRINK, SHRINKS = 0.75, 6
+PEAK_MARGIN_KPA = 0.4  # the headgear force stops where the awake peak comes this far under capillary closing (the prediction's doubt)
 CLOSING = 1.0 - INWARD_SHARE  # a sheet row closes up where its step around is under this share of its root's
 
 
@@ -46,6 +47,17 @@ def needed_reach(states: tuple[StateFit, ...], awake: CushionFit) -> np.ndarray:
             widest = np.maximum(widest, np.nan_to_num(fit.opening_mm))
     widest = maximum_filter1d(widest, size=2 * WINDOW + 1, mode="wrap")
     return np.clip(widest * (1.0 + MARGIN_SHARE) + MARGIN_MM, *REACH_MM)
+
+
+def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitParams) -> float:
+    """N: the headgear force the custom cushion is set to: the least that seals the awake face and
+    each state at the awake CPAP pressure (their seal forces; one that no force up to the limit
+    seals asks for the most allowed), at least the recommended force (`awake.force_n`, the even
+    target pressure), but never more than the force at which the awake peak comes PEAK_MARGIN_KPA
+    under the capillary closing pressure (less than the recommended force where that presses harder)."""
+    most = peak_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params, params.capillary_kpa - PEAK_MARGIN_KPA)
+    need = [awake.seal_force_n] + [s.fits["custom"].seal_force_n for s in states if s.state.cpap_cmh2o is None and "custom" in s.fits]
+    return min(max([awake.force_n] + [most if f is None else f for f in need]), most)
 
 
 def membrane_widths(reach: np.ndarray, rim: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:

@@ -137,6 +137,22 @@ def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     return hi
 
 
+def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, peak_kpa: float, tol_n: float = 0.01) -> float:
+    """Most headgear force (N, up to `params.max_force_n`) at which no covered rim point presses
+    harder than `peak_kpa` (bisection: the pressure grows with the force); the CPAP load's own
+    force where even the least contact presses harder."""
+    def over(force: float) -> bool:
+        return _press_rim(rim, k, width_mm, force, params.cpap_kpa).pressure_kpa.max() > peak_kpa
+
+    lo, hi = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2, params.max_force_n
+    if not over(hi):
+        return hi
+    while hi - lo > tol_n:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if over(mid) else (mid, hi)
+    return lo
+
+
 def recommended_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams) -> float:
     """Headgear force (N) that holds the target pressure over the whole covered rim and balances the
     CPAP load: what a cushion compensated for this face needs."""
@@ -178,13 +194,24 @@ def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None,
     force (N) where already known (it does not depend on `force_n`), else found here."""
     k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
-    pressed = _press_rim(rim, k.effective, width_mm, force, params.cpap_kpa)
+    sealing = seal_force(rim, k.effective, width_mm, params) if sealing is None else sealing
+    return _fitted(rim, k, width_mm, force, sealing, params)
+
+
+def at_force(fit: CushionFit, force_n: float, params: FitParams = FitParams()) -> CushionFit:
+    """`fit`'s cushion on the same face at another headgear force `force_n` N (its contact line,
+    springs and seal force are the same; `params` those it was fitted with)."""
+    return _fitted(fit.rim, fit.stiffness, fit.contact_width_mm, force_n, fit.seal_force_n, params)
+
+
+def _fitted(rim: RimContact, k: Stiffness, width_mm: float, force_n: float, sealing: float | None, params: FitParams) -> CushionFit:
+    """The `CushionFit` of a rim on springs `k` pressed at `force_n` N, its seal force `sealing`."""
+    pressed = _press_rim(rim, k.effective, width_mm, force_n, params.cpap_kpa)
     c = rim.covered
     opening = _left_open(pressed, rim, params.cpap_kpa)
     leak = leak_l_min(opening, rim.ds[c], width_mm, params.cpap_kpa)
-    sealing = seal_force(rim, k.effective, width_mm, params) if sealing is None else sealing
     full = [_spread(c, a) for a in (pressed.pressure_kpa, opening, leak)]
-    return CushionFit(rim, k, *full, pressed, force, sealing, width_mm, params.window_kpa)
+    return CushionFit(rim, k, *full, pressed, force_n, sealing, width_mm, params.window_kpa)
 
 
 def _spread(covered: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -154,6 +154,11 @@ def _motion(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: flo
     return turn
 
 
+def state_params(state: FaceState, params: FitParams) -> FitParams:
+    """The fit parameters of a state: `params` at the state's CPAP pressure, where it sets one."""
+    return params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
+
+
 @dataclass(frozen=True)
 class StateFit:
     """The cushions pressed onto one state: `fits` {"custom" | "generic": CushionFit} of those that
@@ -181,7 +186,7 @@ def fit_states(
     rims = {(name, False, 0.0, 0.0, 0.0): fit.rim for name, fit in (awake or {}).items()}
     out = []
     for state in states:
-        state_params = params if state.cpap_cmh2o is None else replace(params, cpap_cmh2o=state.cpap_cmh2o)
+        at = state_params(state, params)
         on = state_face(face, motion.of(state))
         fits, errors = {}, []
         for name, (mesh, _) in fine.items():
@@ -193,7 +198,7 @@ def fit_states(
             except InputError as exc:
                 errors.append(f"{name}: {exc}")
                 continue
-            fits[name] = fit_rim(rims[key], on, width_mm, force_n, state_params)
+            fits[name] = fit_rim(rims[key], on, width_mm, force_n, at)
         out.append(StateFit(state, fits, "; ".join(errors)))
     return tuple(out)
 

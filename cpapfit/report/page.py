@@ -44,7 +44,7 @@ HEADLINE = (  # (key under fit["custom"|"stock"|"generic"], label)
     ("pressure_max_kpa", "peak contact pressure"),
     ("pressure_max_mmhg", "peak contact pressure"),
     ("leak_l_min", "leak at the set CPAP pressure"),
-    ("headgear_force_n", "headgear force (custom: recommended; stock: as a clinic sets it)"),
+    ("headgear_force_n", "headgear force (custom: set for the awake and sleeping face; stock: as a clinic sets it)"),
     ("seal_force_n", "least headgear force that seals"),
     ("gap_before_load_median_mm", "rim-to-skin gap before load, median (custom: with its pre-load)"),
     ("rim_covered_fraction", "rim over scanned skin (the numbers above are over this part)"),
@@ -139,9 +139,9 @@ def headline_table(fit: dict) -> str:
 
 
 def settings_line(fit: dict) -> str:
-    """The custom cushion's recommended headgear force and the CPAP pressure."""
+    """The custom cushion's headgear force and the CPAP pressure."""
     force = value_cell("headgear_force_n", fit["headgear_force_n"], "b")
-    return f'<p class="force">Recommended headgear force: {force} N at a CPAP pressure of {value_cell("cpap_cmh2o", fit["cpap_cmh2o"], "b")} cmH₂O.</p>'
+    return f'<p class="force">Headgear force: {force} N at a CPAP pressure of {value_cell("cpap_cmh2o", fit["cpap_cmh2o"], "b")} cmH₂O.</p>'
 
 
 def flatten(record: dict, prefix: str = "") -> list[tuple[str, object]]:
