@@ -124,15 +124,17 @@ def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, place
 
 
 def test_the_headgear_force_seals_the_states_it_can_within_the_awake_peak_limit(designed):
-    """The custom cushion's force: at most where the awake peak comes PEAK_MARGIN_KPA under capillary
-    closing; short of that, at least the recommended force and every seal force of the states at
-    the awake pressure (each of those states then sealed)."""
+    """The custom cushion's force: at least the recommended force; above it only as far as the
+    awake peak comes PEAK_MARGIN_KPA under capillary closing; short of that limit, every state at
+    the awake pressure seals at it."""
     _, d = designed
     awake, params = d.fits["custom"], d.fit_params
-    limit = params.capillary_kpa - PEAK_MARGIN_KPA
-    assert awake.summary()["pressure_max_kpa"] <= limit + 0.01
-    if awake.summary()["pressure_max_kpa"] < limit - 0.05:  # not held by the peak
-        assert awake.force_n >= recommended_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params) - 1e-9
+    recommended = recommended_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params)
+    limit, peak = params.capillary_kpa - PEAK_MARGIN_KPA, awake.summary()["pressure_max_kpa"]
+    assert awake.force_n >= recommended - 1e-9
+    if awake.force_n > recommended + 1e-9:
+        assert peak <= limit + 0.01
+    if peak < limit - 0.05:  # not held by the peak
         for s in d.states:
             if s.state.cpap_cmh2o is None:
                 assert s.fits["custom"].seal_force_n is not None and s.fits["custom"].seal_force_n <= awake.force_n + 1e-9, s.state.name

@@ -50,14 +50,14 @@ def needed_reach(states: tuple[StateFit, ...], awake: CushionFit) -> np.ndarray:
 
 
 def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitParams) -> float:
-    """N: the headgear force the custom cushion is set to: the least that seals the awake face and
-    each state at the awake CPAP pressure (their seal forces; one that no force up to the limit
-    seals asks for the most allowed), at least the recommended force (`awake.force_n`, the even
-    target pressure), but never more than the force at which the awake peak comes PEAK_MARGIN_KPA
-    under the capillary closing pressure (less than the recommended force where that presses harder)."""
+    """N: the headgear force the custom cushion is set to: the recommended force (`awake.force_n`,
+    the even target pressure's), raised to the least that seals the awake face and each state at
+    the awake CPAP pressure (their seal forces; one that no force up to the limit seals asks for
+    the most allowed), but not past the force at which the awake peak comes PEAK_MARGIN_KPA under
+    the capillary closing pressure."""
     most = peak_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params, params.capillary_kpa - PEAK_MARGIN_KPA)
     need = [awake.seal_force_n] + [s.fits["custom"].seal_force_n for s in states if s.state.cpap_cmh2o is None and "custom" in s.fits]
-    return min(max([awake.force_n] + [most if f is None else f for f in need]), most)
+    return max(awake.force_n, min(max([most if f is None else f for f in need]), most))
 
 
 def membrane_widths(reach: np.ndarray, rim: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
