@@ -122,25 +122,33 @@ def _played(path: Path, kind, formats, limit_s: float) -> list:
     playback = device.as_playback()
     playback.set_real_time(False)
     sensor, profile = _stream(device, kind, formats)
-    queue, frames, started, deadline = rs.frame_queue(QUEUE_FRAMES, True), [], False, time.monotonic() + limit_s
+    queue, frames, started, ended = rs.frame_queue(QUEUE_FRAMES, True), [], False, False
+    deadline = time.monotonic() + limit_s
     sensor.open(profile)
     sensor.start(queue)
-    while time.monotonic() < deadline:
+    while not ended and time.monotonic() < deadline:
         frame = queue.poll_for_frame()
         if frame:
             started = True
-            frames.append((frame.get_timestamp(), np.asanyarray(frame.get_data()).copy()))
+            frames.append(_copied(frame))
             continue
         status = playback.current_status()  # stopped until the playback has begun, and again at its end
-        if started and status == rs.playback_status.stopped and not queue.poll_for_frame():
-            break
+        if started and status == rs.playback_status.stopped:
+            while frame := queue.poll_for_frame():
+                frames.append(_copied(frame))
+            ended = True
         started |= status == rs.playback_status.playing
         time.sleep(0.001)
     sensor.stop()
     sensor.close()
-    if time.monotonic() >= deadline:
+    if not ended:
         raise InputError(f"{path}: the recording did not play to its end in {limit_s:.0f} s; is the file complete?")
     return frames
+
+
+def _copied(frame) -> tuple[float, np.ndarray]:
+    """(timestamp ms, a copy of its pixels) of a played frame."""
+    return frame.get_timestamp(), np.asanyarray(frame.get_data()).copy()
 
 
 def _recording(depth, depth_frames: list, color, color_frames: list | None) -> Recording:
