@@ -18,13 +18,15 @@ from distributed import Client, LocalCluster, as_completed
 
 from .errors import InputError
 from .io.mesh import MESH_SUFFIXES
+from .io.rsbag import BAG_SUFFIX
 from .jobs import ScanResult, ScanTask, clean_leftovers, run_scan
 
 CONNECT_TIMEOUT_S = 10  # to reach a scheduler, and for it to have a worker
 
 
 def find_scans(input_dir: Path, out_dir: Path) -> tuple[dict[str, Path], list[str]]:
-    """The scans in `input_dir` by output folder name (mesh files and capture folders; hidden
+    """The scans in `input_dir` by output folder name (mesh files, capture folders and sweeps,
+    RealSense recordings; hidden
     entries and `out_dir` left out), and the names of the other entries (not scans)."""
     if not input_dir.is_dir():
         raise InputError(f"{input_dir}: no such folder; INPUT_DIR is a folder of scans (mesh files, capture folders)")
@@ -32,9 +34,9 @@ def find_scans(input_dir: Path, out_dir: Path) -> tuple[dict[str, Path], list[st
     if out == inp or (out.is_relative_to(inp) and out.parent != inp):
         raise InputError(f"{out_dir}: the output folder must be neither the input folder nor inside a scan in it")
     entries = sorted(p for p in input_dir.iterdir() if not p.name.startswith(".") and p.resolve() != out)
-    scans = [p for p in entries if p.is_dir() or p.suffix.lower() in MESH_SUFFIXES]
+    scans = [p for p in entries if p.is_dir() or p.suffix.lower() in (*MESH_SUFFIXES, BAG_SUFFIX)]
     if not scans:
-        raise InputError(f"{input_dir}: no scans in it (mesh files {' '.join(MESH_SUFFIXES)} or RGB-D capture folders)")
+        raise InputError(f"{input_dir}: no scans in it (mesh files {' '.join(MESH_SUFFIXES)}, RGB-D capture folders, sweeps or {BAG_SUFFIX} recordings)")
     return scan_names(scans), [p.name for p in entries if p not in scans]
 
 

@@ -24,11 +24,11 @@ from typing import Callable
 
 from . import __version__
 from .errors import CpapfitError, InputError
-from .io import load_scan
+from .io import is_fused, load_scan
 from .outputs import design_files, report_files
 from .io.landmarks import user_landmarks
 from .io.mesh import companion_files
-from .io.sweep import fused_ply, is_sweep
+from .io.sweep import fused_ply
 from .io.write import json_bytes, write_bytes, write_files
 from .pipeline import Design, design
 from .records import manifest_record
@@ -91,14 +91,14 @@ def design_job(
     on_stage: Callable[[str], None] = _silent, parallel: bool = False, stock: str | None = "best",
 ) -> tuple[DesignRun, dict[str, bytes]]:
     """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
-    files {name: bytes} (with fused_scan.ply for a sweep). `parallel`: the stock sizes and some report pictures made in a second
+    files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes and some report pictures made in a second
     process (`worker`)."""
     with worker(parallel) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
         d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock)
         files = design_files(d, scan)
-        if is_sweep(Path(scan_path)):
+        if is_fused(Path(scan_path)):
             files["fused_scan.ply"] = fused_ply(scan)
         on_stage("report")
         files |= report_files(d, scan, files, submit)

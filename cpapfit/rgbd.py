@@ -38,6 +38,23 @@ def project(points: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
     )
 
 
+def color_to_depth(depth_mm: np.ndarray, intrinsics: Intrinsics, image: np.ndarray, color_intrinsics: Intrinsics,
+                   depth_to_color: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8: the colour camera's (h, w, 3) uint8 `image` registered to the (H, W) depth
+    image (mm, NaN invalid): each valid depth pixel's point, moved into the colour camera by the
+    (4, 4) `depth_to_color` (mm), takes the colour of the pixel it lands on (nearest, as
+    librealsense's align to depth); black where the depth is invalid or the point is out of view."""
+    valid = np.isfinite(depth_mm)
+    seen = backproject(depth_mm, intrinsics)[valid] @ depth_to_color[:3, :3].T + depth_to_color[:3, 3]
+    ahead = seen[:, 2] > 0
+    uv = np.full((len(seen), 2), -1, dtype=np.int64)
+    uv[ahead] = np.round(project(seen[ahead], color_intrinsics)).astype(np.int64)
+    inside = (uv >= 0).all(axis=1) & (uv[:, 0] < image.shape[1]) & (uv[:, 1] < image.shape[0])
+    registered = np.zeros((*depth_mm.shape, 3), dtype=np.uint8)
+    registered.reshape(-1, 3)[np.flatnonzero(valid)[inside]] = image[uv[inside, 1], uv[inside, 0]]
+    return registered
+
+
 def pixel_rays(intrinsics: Intrinsics) -> np.ndarray:
     """(H, W, 3) viewing directions through every pixel centre, with z = 1."""
     ones = np.ones((intrinsics.height, intrinsics.width))

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from cpapfit.rgbd import backproject, grid_triangles, project
+from cpapfit.rgbd import backproject, color_to_depth, grid_triangles, project
 from cpapfit.scan import Intrinsics
 
 K = Intrinsics(64, 48, 600.0, 620.0, 31.5, 23.0)  # a 64x48 crop of a typical depth camera
@@ -61,3 +61,25 @@ def test_grid_boundary_equals_the_edge_definition():
     used = np.bincount(faces.ravel(), minlength=len(pts)) > 0
     assert np.array_equal(scan.rims[used], boundary_vertices(pts, faces)[used])
     assert scan.rims[~used].all()  # a pixel with no triangle is no place to match
+
+
+def test_colour_is_registered_to_depth_through_the_extrinsics():
+    """A wall 500 mm away seen by a depth camera and a colour camera 25 mm to its right (half the
+    depth camera's resolution), whose image codes each pixel's column and row: every depth pixel
+    gets the colour pixel its point projects to (nearest); out of the colour view, or without
+    depth, black."""
+    intr, color_intr = Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5), Intrinsics(32, 24, 30.0, 30.0, 15.5, 11.5)
+    depth = np.full((48, 64), 500.0)
+    depth[:, 5] = np.nan
+    v, u = np.indices((24, 32))
+    image = np.stack([u, v, np.full_like(u, 200)], axis=-1).astype(np.uint8)
+    to_color = np.eye(4)
+    to_color[0, 3] = -25.0  # the colour camera sits at x = +25 mm
+    registered = color_to_depth(depth, intr, image, color_intr, to_color)
+    points = backproject(depth, intr) - [25.0, 0.0, 0.0]
+    expected_u = np.round(30.0 * points[..., 0] / 500.0 + 15.5)
+    expected_v = np.round(30.0 * points[..., 1] / 500.0 + 11.5)
+    seen = np.isfinite(depth) & (expected_u >= 0) & (expected_u < 32)
+    assert seen.sum() > 0.7 * depth.size and (~seen & np.isfinite(depth)).any()
+    assert np.array_equal(registered[seen][:, 0], expected_u[seen]) and np.array_equal(registered[seen][:, 1], expected_v[seen])
+    assert (registered[seen][:, 2] == 200).all() and (registered[~seen] == 0).all()

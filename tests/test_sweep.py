@@ -13,9 +13,12 @@ from cpapfit.fusion import Frame, FusionParams, fuse
 from cpapfit.synthetic.ict_sweep import make_ict_sweep
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_sweep
+from cpapfit.io.rsbag import read_bag
+from cpapfit.io.sweep import read_frames
 from cpapfit.synthetic.accuracy import surface_distance
 from cpapfit.scan import Intrinsics
 from cpapfit.template import load_template, mask_region
+from realsense import write_bag
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +103,7 @@ def test_a_sweep_that_cannot_be_tracked_is_refused():
         fuse(frames)
 
 
-def test_mixed_resolutions_and_bag_files_are_refused_in_one_line(sweep_dir, tmp_path, cli):
+def test_mixed_resolutions_are_refused_in_one_line(sweep_dir, tmp_path, cli):
     folder = tmp_path / "mixed"
     shutil.copytree(sweep_dir, folder)
     for path in sorted((folder / "003").iterdir()):
@@ -111,14 +114,52 @@ def test_mixed_resolutions_and_bag_files_are_refused_in_one_line(sweep_dir, tmp_
     code, out, err = cli("design", folder, "--out", tmp_path / "out")
     assert code == 2 and err.count("\n") == 1 and "frame 003 is 320x240" in err
     assert not (tmp_path / "out").exists()
-    (tmp_path / "take.bag").write_bytes(b"\0" * 64)
-    code, out, err = cli("inspect", tmp_path / "take.bag")
-    assert code == 2 and err.count("\n") == 1 and "pyrealsense2" in err
+
+
+def test_a_realsense_recording_is_read_and_fused_as_the_sweep_folder_it_was_made_from(sweep, sweep_dir, fused, tmp_path):
+    """The sweep recorded by librealsense (a software device): the same frames (depth within one
+    depth unit, the colour at every valid depth pixel), intrinsics (float32) and depth scale as
+    the folder, the same again when read again, and its fused surface on the folder's (median under
+    0.1 mm); recorded without colour, the same depth and no colour."""
+    bag = write_bag(sweep, tmp_path / "take.bag")
+    (frames, scales), (folder_frames, folder_scales) = read_bag(bag), read_frames(sweep_dir)
+    assert scales == folder_scales == {10000.0} and [f.name for f in frames] == [f.name for f in folder_frames]
+    for frame, truth in zip(frames, folder_frames):
+        k, k_truth = frame.intrinsics, truth.intrinsics
+        assert np.allclose([k.width, k.height, k.fx, k.fy, k.cx, k.cy],
+                           [k_truth.width, k_truth.height, k_truth.fx, k_truth.fy, k_truth.cx, k_truth.cy], atol=1e-4)
+        valid = np.isfinite(truth.depth)
+        assert (np.isfinite(frame.depth) == valid).all() and valid.sum() > 50_000
+        assert np.abs(frame.depth - truth.depth)[valid].max() <= 1000.0 / 10000.0
+        assert (frame.image[valid] == truth.image[valid]).all()
+    again, _ = read_bag(bag)  # played back not in real time: every frame, the same each time
+    assert all(np.array_equal(f.depth, g.depth, equal_nan=True) and np.array_equal(f.image, g.image) for f, g in zip(frames, again))
+    scan = load_scan(bag)
+    assert "fused 4 of 4 frames" in scan.units_note and "depth_scale 10000 " in scan.units_note
+    assert np.median(surface_distance(scan.vertices, fused.vertices, fused.faces)) < 0.1
+    assert abs(len(scan.vertices) - len(fused.vertices)) < 0.01 * len(fused.vertices)
+    depth_only, _ = read_bag(write_bag(sweep, tmp_path / "depth.bag", color=False))
+    assert all(f.image is None and np.array_equal(f.depth, g.depth, equal_nan=True) for f, g in zip(depth_only, frames))
+
+
+def test_broken_realsense_recordings_are_refused_in_one_line(sweep, tmp_path, cli):
+    """A truncated recording, one that is no recording, one without depth and one of two frames:
+    one line each, exit 2, no design folder."""
+    whole = write_bag(sweep, tmp_path / "whole.bag").read_bytes()
+    (tmp_path / "cut.bag").write_bytes(whole[: len(whole) // 2])
+    (tmp_path / "zeros.bag").write_bytes(b"\0" * 64)
+    write_bag(sweep, tmp_path / "colour.bag", depth=False)
+    write_bag(sweep[:2], tmp_path / "two.bag")
+    for name, says in (("cut", "not a readable RealSense recording"), ("zeros", "not a readable RealSense recording"),
+                       ("colour", "no depth stream"), ("two", "2 depth frames recorded; a sweep needs at least 3")):
+        code, out, err = cli("design", tmp_path / f"{name}.bag", "--out", tmp_path / name)
+        assert code == 2 and err.count("\n") == 1 and says in err, (name, err)
+        assert not (tmp_path / name).exists()
 
 
 def test_open3d_is_imported_only_to_fuse_a_sweep():
-    """The command line and its commands do not pay Open3D's import (seconds)."""
-    code = "import sys, cpapfit.cli, cpapfit.commands, cpapfit.api; sys.exit('open3d' in sys.modules)"
+    """The command line and its commands do not pay Open3D's import (seconds), nor pyrealsense2's."""
+    code = "import sys, cpapfit.cli, cpapfit.commands, cpapfit.api; sys.exit('open3d' in sys.modules or 'pyrealsense2' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 

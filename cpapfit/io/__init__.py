@@ -1,4 +1,4 @@
-"""Files in and out: scans (meshes, RGB-D captures), units, atomic writes."""
+"""Files in and out: scans (meshes, RGB-D captures, sweeps, RealSense recordings), units, atomic writes."""
 
 from pathlib import Path
 
@@ -6,18 +6,18 @@ from ..errors import InputError, UnitsError
 from ..scan import Scan
 from .capture import is_capture, load_capture
 from .mesh import load_mesh_scan
-from .sweep import is_sweep, load_sweep
+from .rsbag import is_bag, read_bag
+from .sweep import fused_scan, is_sweep, load_sweep
 
 
 def load_scan(path: Path, units: str = "auto") -> Scan:
-    """Read a mesh file, an RGB-D capture folder or a sweep (a folder of capture folders, fused)
-    into a `Scan` in millimetres."""
+    """Read a mesh file, an RGB-D capture folder or a sweep (a folder of capture folders, or a
+    RealSense recording: fused) into a `Scan` in millimetres."""
     path = Path(path)
-    if path.suffix.lower() == ".bag":
-        raise InputError(
-            f"{path}: RealSense recordings (.bag) are not read (pyrealsense2 is not installed with cpapfit); "
-            "export its frames as capture folders (color.png, depth.png, intrinsics.json) into one folder, a sweep"
-        )
+    if is_bag(path):
+        if units != "auto":
+            raise UnitsError(f"{path}: a RealSense recording takes its units from its depth stream's depth scale; drop --units")
+        return fused_scan(*read_bag(path), path)
     if is_sweep(path):
         if units != "auto":
             raise UnitsError(f"{path}: a sweep takes its units from depth_scale in its frames' intrinsics.json; drop --units")
@@ -29,3 +29,8 @@ def load_scan(path: Path, units: str = "auto") -> Scan:
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
     return load_mesh_scan(path, units)
+
+
+def is_fused(path: Path) -> bool:
+    """True when the scan at `path` is fused from depth frames: a sweep folder or a RealSense recording."""
+    return is_bag(path) or is_sweep(path)

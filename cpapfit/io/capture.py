@@ -56,11 +56,16 @@ def read_frame(folder: Path, depth_range_mm: tuple[float, float] = DEPTH_RANGE_M
             f"{folder}: depth.png is {raw.shape[1]}x{raw.shape[0]} but intrinsics.json says "
             f"{intr.width}x{intr.height}; the intrinsics belong to another camera mode"
         )
-    image = _read_color(folder, raw.shape)
+    return intr, depth_scale, depth_mm(raw, depth_scale, depth_range_mm), _read_color(folder, raw.shape)
+
+
+def depth_mm(raw: np.ndarray, depth_scale: float, depth_range_mm: tuple[float, float] = DEPTH_RANGE_MM) -> np.ndarray:
+    """(H, W) float64 mm of (H, W) uint16 raw depth in units of 1/depth_scale m; NaN where 0 (no
+    depth), 65535 (saturated) or outside `depth_range_mm`."""
     depth = raw.astype(np.float64) * (1000.0 / depth_scale)
     valid = (raw > 0) & (raw < 65535) & (depth >= depth_range_mm[0]) & (depth <= depth_range_mm[1])
     depth[~valid] = np.nan
-    return intr, depth_scale, depth, image
+    return depth
 
 
 def read_intrinsics(path: Path) -> tuple[Intrinsics, float]:

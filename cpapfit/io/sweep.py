@@ -2,7 +2,8 @@
 
 A sweep holds no color.png, depth.png or intrinsics.json of its own; each subfolder that does is a
 frame (other subfolders, such as a synthetic sweep's ground_truth/, are not). The frames are one
-camera: one resolution and one set of intrinsics. The fusion itself is `cpapfit.fusion`.
+camera: one resolution and one set of intrinsics. The fusion itself is `cpapfit.fusion`; a
+RealSense recording (`rsbag.py`) is fused here too.
 """
 
 from pathlib import Path
@@ -54,16 +55,21 @@ def read_frames(folder: Path):
 
 
 def load_sweep(folder: Path) -> Scan:
-    """A sweep fused (`fusion.fuse`) into a mesh `Scan` (mm, the first fused frame's camera frame,
-    vertex colours); the note says which frames were fused and which dropped, and why."""
+    """A sweep folder fused into a mesh `Scan` (`fused_scan`)."""
+    return fused_scan(*read_frames(folder), folder)
+
+
+def fused_scan(frames, scales: set[float], source: Path) -> Scan:
+    """The frames (`fusion.Frame`, in order, one camera; their depth_scales `scales`, units per
+    metre) fused (`fusion.fuse`) into a mesh `Scan` (mm, the first fused frame's camera frame, vertex
+    colours); the note says which frames were fused and which dropped, and why."""
     from ..fusion import fuse
 
-    frames, scales = read_frames(folder)
     fused = fuse(frames)
     faces, normals = _wound_alike(fused.vertices, fused.faces)
     scale = ", ".join(f"{s:g}" for s in sorted(scales))
     return Scan(
-        vertices=fused.vertices, faces=faces, normals=normals, source=str(folder), units="mm",
+        vertices=fused.vertices, faces=faces, normals=normals, source=str(source), units="mm",
         units_note=f"units: millimetres, from depth_scale {scale} units per metre; {fused.note()}",
         colors=fused.colors,
     )
