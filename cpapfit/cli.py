@@ -81,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument("--mask", choices=["nasal", "oronasal"], help="the cushion for --generic and --stock, the states for --states")
             p.add_argument("--states", action="store_true",
                            help="also press the cushions onto the face asleep: supine with the mouth open, mask pushed by a pillow, CPAP 4 and 20 cmH2O")
-            p.add_argument("--force", type=float, help="headgear force in N (default: the force recommended for this cushion)")
+            p.add_argument("--force", type=float, help="headgear force in N (default: the force recommended for this cushion; "
+                                                       "with --states, raised for them within the awake peak's limit)")
             p.add_argument("--cpap", type=float, default=10.0, help="CPAP pressure in cmH2O (default 10)")
         p.set_defaults(func=f"cmd_{name}")
 
