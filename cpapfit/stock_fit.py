@@ -20,7 +20,7 @@ import trimesh
 
 from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
-from .evaluation.fit import CushionFit, Face, FitParams, fit_rim
+from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
 from .evaluation.states import StateFit, fit_states, merged, sleep_states
 from .work import at_once
@@ -215,4 +215,4 @@ def _pressed(size, zone: RimZone, face: Face, offset, params: CushionParams, fit
     seal = at_most.seal_force_n
     if seal is None or seal * MARGIN > COMFORT_N:
         return StockFit(size, tuple(offset), at_most, False)
-    return StockFit(size, tuple(offset), fit_rim(rim, face, params.flange_mm, seal * MARGIN, fit_params, sealing=seal), True)
+    return StockFit(size, tuple(offset), at_force(at_most, seal * MARGIN, fit_params), True)
