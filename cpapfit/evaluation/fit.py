@@ -188,14 +188,12 @@ def fit_cushion(cushion: trimesh.Trimesh, face: Face, width_mm: float, force_n: 
     return fit_rim(find_rim(cushion, face.scan, face.registered, face.axis, face.up), face, width_mm, force_n, params)
 
 
-def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams(),
-            sealing: float | None = None) -> CushionFit:
-    """`fit_cushion` of a cushion whose contact line on this face is `rim`; `sealing`: its seal
-    force (N) where already known (it does not depend on `force_n`), else found here."""
+def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams()) -> CushionFit:
+    """`fit_cushion` of a cushion whose contact line on this face is `rim` (the same cushion at
+    another force: `at_force`)."""
     k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
-    sealing = seal_force(rim, k.effective, width_mm, params) if sealing is None else sealing
-    return _fitted(rim, k, width_mm, force, sealing, params)
+    return _fitted(rim, k, width_mm, force, seal_force(rim, k.effective, width_mm, params), params)
 
 
 def at_force(fit: CushionFit, force_n: float, params: FitParams = FitParams()) -> CushionFit:
