@@ -132,16 +132,21 @@ def state_summary(row: dict) -> str:
 
 
 def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
-    """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`, and its worst."""
+    """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`,
+    its worst leak while on the face, and the states whose CPAP load lifts it off (no leak figure
+    means anything there: the mask is off)."""
     states = fit.get("states", [])[1:]
     parts = []
     for name in CUSHIONS:
         rows = [row for row in states if name in row]
+        on = [row for row in rows if not row[name].get("lifted_off")]
+        off = [row["name"] for row in rows if row[name].get("lifted_off")]
         if rows:
-            worst = max(rows, key=lambda row: row[name]["leak_l_min"])
-            over = sum(row[name]["leak_l_min"] > leak_l_min for row in rows)
-            parts.append(f"{name} leaks over {leak_l_min:g} L/min in {over} of {len(rows)} (worst: {worst['name']}, "
-                         f"{worst[name]['leak_l_min']:.1f} L/min)")
+            over = sum(row[name]["leak_l_min"] > leak_l_min for row in on) + len(off)
+            notes = [f"worst on the face: {w['name']}, {w[name]['leak_l_min']:.1f} L/min"
+                     for w in [max(on, key=lambda row: row[name]["leak_l_min"])] if on]
+            notes += [f"lifted off by the CPAP load: {', '.join(off)}"] if off else []
+            parts.append(f"{name} leaks over {leak_l_min:g} L/min in {over} of {len(rows)} ({'; '.join(notes)})")
     return f"asleep: {'; '.join(parts)}" if parts else "asleep: not evaluated"
 
 

@@ -144,8 +144,12 @@ def test_the_headgear_force_seals_the_states_it_can_within_the_awake_peak_limit(
 def test_the_design_line_says_in_how_many_states_each_cushion_leaks():
     from cpapfit.commands import asleep_summary
 
-    row = lambda name, custom, stock: {"name": name, "custom": {"leak_l_min": custom}, "stock": {"leak_l_min": stock}}  # noqa: E731
-    fit = {"states": [row("awake", 0.0, 9.0), row("a", 0.5, 3.0), row("b", 12.0, 1.0), {"name": "c", "error": "no skin"}]}
-    assert asleep_summary(fit) == ("asleep: custom leaks over 2 L/min in 1 of 2 (worst: b, 12.0 L/min); "
-                                   "stock leaks over 2 L/min in 1 of 2 (worst: a, 3.0 L/min)")
+    def row(name, custom, stock, lifted=False):
+        return {"name": name, "custom": {"leak_l_min": custom, "lifted_off": lifted}, "stock": {"leak_l_min": stock, "lifted_off": False}}
+
+    fit = {"states": [row("awake", 0.0, 9.0), row("a", 0.5, 3.0), row("b", 12.0, 1.0), {"name": "c", "error": "no skin"},
+                      row("d", 1800.0, 0.0, lifted=True)]}
+    assert asleep_summary(fit) == ("asleep: custom leaks over 2 L/min in 2 of 3 (worst on the face: b, 12.0 L/min; "
+                                   "lifted off by the CPAP load: d); "
+                                   "stock leaks over 2 L/min in 1 of 3 (worst on the face: a, 3.0 L/min)")
     assert asleep_summary({}) == "asleep: not evaluated"
