@@ -153,3 +153,14 @@ def test_the_design_line_says_in_how_many_states_each_cushion_leaks():
                                    "lifted off by the CPAP load: d); "
                                    "stock leaks over 2 L/min in 1 of 3 (worst on the face: a, 3.0 L/min)")
     assert asleep_summary({}) == "asleep: not evaluated"
+
+
+def test_the_report_gives_no_leak_figure_for_a_mask_the_cpap_load_lifts_off():
+    from cpapfit.report.page import states_table
+
+    def fit(leak, lifted):
+        return {"leak_l_min": leak, "window_fraction": 0.0, "pressure_max_kpa": 0.0, "pressure_max_region": "nasal bridge", "lifted_off": lifted}
+
+    table = states_table({"custom": {}, "states": [{"name": "awake", "custom": fit(0.25, False)}, {"name": "CPAP 20", "custom": fit(1809.2, True)}]})
+    assert "mask off" in table and "1809" not in table and "lifted off: the CPAP load beats the straps" in table
+    assert 'data-key="states.0.custom.leak_l_min"' in table

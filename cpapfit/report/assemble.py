@@ -62,7 +62,8 @@ def state_picture(shot, d: Design, scale: ColourScale) -> Picture:
     fits = {"awake": d.fits["custom"]} | {s.state.name: s.fits["custom"] for s in d.states if "custom" in s.fits}
     rims = {n: rim_fit(fit) for n, fit in fits.items()}
     summaries = {n: fit.summary() for n, fit in fits.items()}
-    titles = {n: f"{n}: leak {s['leak_l_min']:.1f} L/min, peak {s['pressure_max_kpa']:.1f} kPa" for n, s in summaries.items()}
+    titles = {n: f"{n}: lifted off by the CPAP load" if fits[n].pressed.lifted else
+              f"{n}: leak {s['leak_l_min']:.1f} L/min, peak {s['pressure_max_kpa']:.1f} kPa" for n, s in summaries.items()}
     arrays = {n: (r.points, np.asarray(r.pressure_kpa), np.asarray(r.open, dtype=bool)) for n, r in rims.items()}
     return Picture("states_pressure.png", "The custom cushion asleep",
                    "The custom cushion's contact pressure in each state of the sleeping face (lying on the back with the mouth open, the mask pushed "

@@ -166,6 +166,13 @@ def _peak_where(fit: dict | None) -> str:
     return "lifted off: the CPAP load beats the straps" if fit["lifted_off"] else str(fit["pressure_max_region"])
 
 
+def _state_cell(fit: dict, path: str, key: str) -> str:
+    """A state's `key` of the cushion at `path`; no leak figure where the CPAP load lifts it off (the mask is off)."""
+    if key == "leak_l_min" and lookup(fit, f"{path}.lifted_off"):
+        return "<td>mask off</td>"
+    return value_cell(f"{path}.{key}", lookup(fit, f"{path}.{key}"))
+
+
 def states_table(fit: dict) -> str:
     """Each state of the sleeping face (fit.json's `states`): every cushion's leak, window fraction,
     peak pressure and where; empty when the record has no states."""
@@ -176,7 +183,7 @@ def states_table(fit: dict) -> str:
     head = "".join(f"<th>{c}: {label} ({unit_of(key)[0]})</th>" for c in cushions for key, label in STATE_COLUMNS)
     body = []
     for i, row in enumerate(states):
-        cells = "".join(value_cell(f"states.{i}.{c}.{key}", lookup(fit, f"states.{i}.{c}.{key}")) for c in cushions for key, _ in STATE_COLUMNS)
+        cells = "".join(_state_cell(fit, f"states.{i}.{c}", key) for c in cushions for key, _ in STATE_COLUMNS)
         cells += "".join(f"<td>{html.escape(_peak_where(row.get(c)))}</td>" for c in cushions)
         note = f"<br><small>not evaluated: {html.escape(row['error'])}</small>" if "error" in row else ""
         body.append(f"<tr><th>{html.escape(row['name'])}{note}</th>{cells}</tr>")
