@@ -153,8 +153,7 @@ def register(
     basis: the template's shape basis for the morphable start (`morphable.ict_basis`; None: none)."""
     lm_index, lm_target = _landmark_targets(landmarks, params)
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
-    runs = [(s, _register(aligned, faces, s, (lm_index, lm_target), factor, params))
-            for s in _setups(aligned, faces, scan, (lm_index, lm_target), params, mirror, basis)]  # one target, the same landmarks
+    runs = _runs(aligned, faces, scan, (lm_index, lm_target), factor, params, mirror, basis)  # one target, the same landmarks
     if len(runs) > 1 and runs[1][1].bending < (1.0 - params.morphable.margin) * runs[0][1].bending:
         setup, first = runs[1][0], replace(runs[1][1], start="morphable")
     else:
@@ -167,7 +166,7 @@ def register(
 
 class _Setup(NamedTuple):
     """What the elastic ICP needs besides its landmarks: the incidence matrix, the scan as a
-    target, the membrane's Laplacian, the affine start (n, 3) mm and the mirror term (or None)."""
+    target, the membrane's Laplacian, the start (n, 3) mm and the mirror term (or None)."""
 
     vf: csr_matrix
     target: Target
@@ -176,23 +175,30 @@ class _Setup(NamedTuple):
     mirror: MirrorTerm | None
 
 
-def _setups(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, params: NonrigidParams,
-            mirror: np.ndarray | None, basis: ShapeBasis | None) -> list[_Setup]:
-    """The elastic ICP's set-up from the affine start and, given a shape basis, from the morphable one
-    (`morphable.fit_shape`, begun at the similarity: the affine start, fitted to a face unlike the
-    template's, slid 2-3 mm along ICT subjects' skin)."""
+def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, factor: float, params: NonrigidParams,
+          mirror: np.ndarray | None, basis: ShapeBasis | None) -> list[tuple[_Setup, Registration]]:
+    """The elastic ICP (its set-up and result) from the affine start and, given a shape basis, from the
+    morphable one (`morphable.fit_shape`, begun at the similarity: the affine start, fitted to a face
+    unlike the template's, slid 2-3 mm along ICT subjects' skin), each start's chain in a thread of
+    its own (the factorisations, solves and k-d tree queries release the GIL)."""
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
     target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
     lap = laplacian(aligned, faces)
-    starts = [_affine_start(aligned, normals, target, landmarks, params)]
+    starts = [lambda: _affine_start(aligned, normals, target, landmarks, params)]
     if basis is not None and params.morphable is not None:
-        starts.append(fit_shape(aligned, basis, target, lambda v: vertex_normals(v, faces, vf),
-                                (params.point_to_point, params.point_to_plane), (params.max_distance_mm, params.max_normal_deg),
-                                params.morphable))
-    return [_Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
-            for start in starts]
+        starts.append(lambda: fit_shape(aligned, basis, target, lambda v: vertex_normals(v, faces, vf),
+                                        (params.point_to_point, params.point_to_plane),
+                                        (params.max_distance_mm, params.max_normal_deg), params.morphable))
+
+    def run(start_of) -> tuple[_Setup, Registration]:
+        start = start_of()
+        setup = _Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
+        return setup, _register(aligned, faces, setup, landmarks, factor, params)
+
+    with ThreadPoolExecutor(max_workers=len(starts)) as pool:
+        return list(pool.map(run, starts))
 
 
 def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: NonrigidParams) -> MirrorTerm:
