@@ -20,7 +20,7 @@ from .cushion.compensation import Preload, compensated_cushion
 from .cushion.envelope import enveloped_cushion, headgear_force
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
-from .evaluation.states import StateFit, fit_states, sleep_states, state_params
+from .evaluation.states import FaceState, StateFit, fit_states, sleep_states, state_faces, state_params
 from .fabrication.dead_space import dead_space_ml, ring_clearance
 from .fabrication.files import SolidError, check_closed, check_solid
 from .fabrication.frame import Frame, build_frame
@@ -205,13 +205,14 @@ def design(
     params = replace(params, frame_clearance_mm=ring_clearance(judged.neutral, face.registered))  # the dead space within its limit
     cushion, preload, solid, wall = compensated_cushion(contact, face, reg.vertices, params, fit_params)
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
-    cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake)
+    asleep = state_faces(face, sleep_states(mask))
+    cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake, asleep)
     checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould, frame")
     moulded = mould(cushion, solid)
     frame = build_frame(cushion, solid)
     frame_checks = check_closed(frame.mesh, "the frame")
-    fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params)
+    fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params, faces=asleep)
     compared = None
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
@@ -276,13 +277,13 @@ def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
 
 def pressed_asleep(
     face: Face, cushions: dict[str, trimesh.Trimesh], mask: str, params: CushionParams = CushionParams(),
-    fit_params: FitParams = FitParams(), force_n: float | None = None,
+    fit_params: FitParams = FitParams(), force_n: float | None = None, faces: dict[FaceState, Face] | None = None,
 ) -> tuple[dict[str, CushionFit], tuple[StateFit, ...]]:
     """The `evaluated_cushions` pressed onto the face awake (`evaluate`) and in each sleep state of
     a `mask`, all at one headgear force: `force_n`, or the custom cushion's set for the states
-    (`headgear_force`)."""
+    (`headgear_force`). `faces`: the face in each sleep state where already made (`state_faces`)."""
     fits = evaluate(face, cushions, params, fit_params, force_n)
-    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits)
+    states = fit_states(cushions, face, sleep_states(mask), params.flange_mm, fits["custom"].force_n, fit_params, fits, faces=faces)
     force = fits["custom"].force_n if force_n is not None else headgear_force(fits["custom"], states, fit_params)
     if force == fits["custom"].force_n:
         return fits, states

@@ -27,7 +27,7 @@ from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_fo
 from ..evaluation.membrane import width_for
 from ..evaluation.rim import SECTORS
 from ..solids import self_intersecting_edges
-from ..evaluation.states import CPAP_RANGE_CMH2O, StateFit, fit_states, sleep_states
+from ..evaluation.states import CPAP_RANGE_CMH2O, FaceState, StateFit, fit_states, sleep_states
 
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
 REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's slack); the widest is a stock full-face flap's
@@ -84,16 +84,16 @@ def converging(roots: np.ndarray, directions: np.ndarray) -> np.ndarray:
 
 def enveloped_cushion(
     contact: Contact, face: Face, warped: np.ndarray, cushion: Cushion, preload_mm: np.ndarray, wall: trimesh.Trimesh,
-    fit_params: FitParams, awake: CushionFit,
+    fit_params: FitParams, awake: CushionFit, faces: dict[FaceState, Face] | None = None,
 ) -> tuple[Cushion, trimesh.Trimesh, float]:
     """(the cushion with its membrane, its printable solid, the membrane's thinnest wall mm): the
     `cushion` (its `wall` solid pressed onto the face as `awake`, at the force the states keep)
     given the membrane the predicted states need; narrowed where its sheet would twist
     (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
-    SHRINKS times each."""
+    SHRINKS times each. `faces`: the face in each sleep state where already made (`state_faces`)."""
     params = cushion.params
     states = fit_states({"custom": wall}, face, sleep_states(cushion.mask), params.flange_mm, awake.force_n, fit_params,
-                        {"custom": awake})
+                        {"custom": awake}, faces=faces)
     widths = membrane_widths(needed_reach(states, awake), awake.rim.points, contact, params.membrane_mm)
     for _ in range(SHRINKS + 1):
         sized = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered)

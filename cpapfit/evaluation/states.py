@@ -169,16 +169,25 @@ class StateFit:
     error: str = ""
 
 
+def state_faces(face: Face, states: tuple[FaceState, ...]) -> dict[FaceState, Face]:
+    """{state: the `face` in it} (`state_face`) for each of `states`: made once, the faces and their
+    spatial indexes serve every cushion pressed onto them."""
+    motion = motions(np.asarray(face.registered.vertices))
+    return {state: state_face(face, motion.of(state)) for state in states}
+
+
 def fit_states(
     cushions: dict[str, trimesh.Trimesh], face: Face, states: tuple[FaceState, ...], width_mm: float, force_n: float,
     params: FitParams = FitParams(), awake: dict[str, CushionFit] | None = None, thickness: dict[str, np.ndarray] | None = None,
+    faces: dict[FaceState, Face] | None = None,
 ) -> tuple[StateFit, ...]:
     """Every cushion of `cushions` (name -> mesh, mm, scan frame) pressed onto each of `states` of
     `face` at the awake headgear force `force_n` N; `width_mm` the seal flange width. Each cushion is
     refined once, and states that differ only in pressure share their contact lines, those of the
     `awake` fits of the same cushions on this face where given: the numbers are `fit_cushion`'s of
-    the moved cushion on the state's face. `thickness`: {name: (V,) mm} of cushions already `refined`."""
-    motion = motions(np.asarray(face.registered.vertices))
+    the moved cushion on the state's face. `thickness`: {name: (V,) mm} of cushions already `refined`;
+    `faces`: the face in each state where already made (`state_faces`)."""
+    faces = faces or state_faces(face, states)
     thickness = thickness or {}
     fine = {name: (mesh, thickness[name]) if name in thickness else refined(mesh) for name, mesh in cushions.items()}
     turn = max((abs(state.roll_deg) for state in states), default=0.0)
@@ -187,7 +196,7 @@ def fit_states(
     out = []
     for state in states:
         at = state_params(state, params)
-        on = state_face(face, motion.of(state))
+        on = faces[state]
         fits, errors = {}, []
         for name, (mesh, _) in fine.items():
             key = (name, state.supine, state.mouth_open_mm, state.shift_mm, state.roll_deg)
