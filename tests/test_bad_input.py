@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import png_bytes, write_files
+from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.render import raycast, shade
 from cpapfit.rgbd import project
@@ -88,6 +89,14 @@ def with_bad_vertices(value, step: int):
 
 case("NaN vertices")(with_bad_vertices(np.nan, 50))
 case("an infinite vertex")(with_bad_vertices(np.inf, 10**6))
+
+
+@case("a head mesh in inches, its units left to auto")
+def _(d, s):
+    """Read as centimetres (a head's size in both), the face is 2.54 times too small: the refusal asks after the units."""
+    head = ict_head_mesh(1).mesh
+    words = ["the template's size (an adult's: x0.7-1.4)", "units: centimetres, decided from the size", "--units in"]
+    return [mesh_file(d / "inches.ply", head.vertices / 25.4, head.faces)], words
 
 
 @case("text with a mesh extension")

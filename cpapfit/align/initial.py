@@ -15,7 +15,7 @@ from .fallback import fallback_alignment
 from ..landmarks.types import WITHOUT_COLOURS, Landmarks
 from .check import FaceCheck, check_face, require_face
 from ..similarity import Similarity, fit_similarity
-from ..thresholds import FRONT_SIZE, DISAGREE_MM
+from ..thresholds import FRONT_SIZE, DISAGREE_MM, SCALE_RANGE
 
 
 # A capture's second look, only to agree or not with its image's low-nosed face (`_agreed`): MediaPipe
@@ -49,7 +49,7 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
         across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
         require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture, across)
     if found.landmarks.path == "fallback":
-        require_agreement(template, found.similarity, failed)
+        require_agreement(template, found.similarity, failed, _size_doubt(scan, failed))
     rejected = f"the face found by {' and '.join(dict.fromkeys(label for label, _ in failed))} failed the face check" if failed else ""
     return replace(found.landmarks, rejected=rejected), found.similarity, check
 
@@ -88,12 +88,13 @@ def _agreed(template: Template, found: Detection, label: str, low: list[tuple[st
     return None
 
 
-def require_agreement(template: Template, shape: Similarity, failed: list[tuple[str, Detection]]) -> None:
+def require_agreement(template: Template, shape: Similarity, failed: list[tuple[str, Detection]], doubt: str = "") -> None:
     """Refuse (InputError) when a detected face that failed the face check and the face's shape alone
     (`shape`, the fallback's similarity) put the template's mask region (both masks' contact bands)
     over DISAGREE_MM apart (mean): one of them lies on the wrong part of the face, and neither the
     geometry nor the face check can tell which (an ICT subject's nasal cushion landed on the lips,
-    45 mm off, placed by the shape; a colour image 3 cm off its depth puts the detection off)."""
+    45 mm off, placed by the shape; a colour image 3 cm off its depth puts the detection off).
+    `doubt`: what the refusal asks the user to check (`_size_doubt`); by default the colour's registration."""
     for label, det in failed:
         if det.landmarks.path == "fallback":
             continue
@@ -101,8 +102,21 @@ def require_agreement(template: Template, shape: Similarity, failed: list[tuple[
         if apart > DISAGREE_MM:
             raise InputError(
                 f"the face found by {label} (which failed the face check) and the face's shape alone place the mask region "
-                f"{apart:.0f} mm apart (at most {DISAGREE_MM:g}): one of them is on the wrong part of the face; does the colour "
-                "image line up with the depth? give landmarks with --landmarks, or rescan facing the camera")
+                f"{apart:.0f} mm apart (at most {DISAGREE_MM:g}): one of them is on the wrong part of the face; "
+                f"{doubt or 'does the colour image line up with the depth?'} give landmarks with --landmarks, or rescan facing the camera")
+
+
+def _size_doubt(scan: Scan, failed: list[tuple[str, Detection]]) -> str:
+    """Where a detected face failed the face check at a size no adult's face is (the template scaled
+    outside SCALE_RANGE), the question that asks after the scan's scale: its units (a mesh or a
+    point cloud, with how they were decided) or its depth scale (a capture); else ""."""
+    odd = [(label, det.similarity.scale) for label, det in failed if not SCALE_RANGE[0] <= det.similarity.scale <= SCALE_RANGE[1]]
+    if not odd:
+        return ""
+    label, scale = odd[0]
+    what = ("its depth scale and intrinsics this camera's?" if scan.is_capture
+            else f"its units right ({scan.units_note or scan.units})? state them with --units;")
+    return f"the face found by {label} is x{scale:.2f} the template's size (an adult's: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g}): are {what}"
 
 
 def _apart(template: Template, one: Similarity, other: Similarity) -> float:
