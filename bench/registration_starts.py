@@ -1,0 +1,65 @@
+"""Which elastic ICP run the registration keeps: both runs (from the affine and from the morphable
+start) on subjects with a truth, each run's bending (|L D|^2 from its start), mean pair distance
+from the scan, and its contact bands' mean distance from their true places (mm), one JSON line per
+subject. ICT subjects (all 100 modes of ../shared's model) as framed captures or head meshes,
+template-made subjects as captures (any pose).
+
+Usage: .venv/bin/python bench/registration_starts.py capture:9001 mesh:9000 template:0 ...
+"""
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import cpapfit.align.nonrigid as nr
+from cpapfit.io import load_scan
+from cpapfit.io.capture import capture_files
+from cpapfit.io.write import write_files
+from cpapfit.pipeline import align, register_template
+from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.template import MASKS, load_template
+from ict_population import FULL_MODEL, subject
+
+BANDS = {mask: load_template().regions[mask].band for mask in MASKS}
+
+
+def template_subject(seed: int):
+    """(scan, truth (N, 3) mm) of template-made subject `seed` as a capture."""
+    ph = make_phantom(seed)
+    folder = Path(tempfile.mkdtemp())
+    write_files(folder, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    return load_scan(folder), ph.surface
+
+
+def both_runs(scan, truth) -> dict:
+    """Each start's run on `scan` (its figures, mm) and the start kept."""
+    out = {}
+    runs = nr._runs
+
+    def spy(*args, **kwargs):
+        done = runs(*args, **kwargs)
+        for name, (_, reg) in zip(("affine", "morphable"), done):
+            out[name] = {"bending": reg.bending, "distance_mm": float(np.mean(reg.residual[reg.valid])),
+                         **{m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}}
+        return done
+
+    nr._runs = spy
+    try:
+        out["kept"] = register_template(scan, align(scan)).start
+    finally:
+        nr._runs = runs
+    return out
+
+
+def main() -> None:
+    for spec in sys.argv[1:]:
+        kind, seed = spec.split(":")
+        scan, truth = template_subject(int(seed)) if kind == "template" else subject(int(seed), kind, FULL_MODEL)[:2]
+        print(json.dumps({"kind": kind, "seed": int(seed), **both_runs(scan, truth)}), flush=True)
+
+
+if __name__ == "__main__":
+    main()
