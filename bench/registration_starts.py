@@ -29,9 +29,9 @@ BANDS = {mask: load_template().regions[mask].band for mask in MASKS}
 def template_subject(seed: int):
     """(scan, truth (N, 3) mm) of template-made subject `seed` as a capture."""
     ph = make_phantom(seed)
-    folder = Path(tempfile.mkdtemp())
-    write_files(folder, capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
-    return load_scan(folder), ph.surface
+    with tempfile.TemporaryDirectory() as tmp:
+        write_files(Path(tmp), capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+        return load_scan(Path(tmp)), ph.surface
 
 
 def both_runs(scan, truth) -> dict:
@@ -42,7 +42,7 @@ def both_runs(scan, truth) -> dict:
     def spy(*args, **kwargs):
         done = runs(*args, **kwargs)
         for name, (_, reg) in zip(("affine", "morphable"), done):
-            out[name] = {"bending": reg.bending, "distance_mm": float(np.mean(reg.residual[reg.valid])),
+            out[name] = {"bending": reg.bending, "distance_mm": nr._mean_distance(reg),
                          **{m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}}
         return done
 

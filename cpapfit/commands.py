@@ -124,29 +124,35 @@ def fit_summary(fit: dict) -> str:
 
 
 def state_summary(row: dict) -> str:
-    """One line on a state of fit.json's `states`: each cushion's leak and peak pressure."""
-    cells = [f"{name} leak {row[name]['leak_l_min']:.1f} L/min, peak {row[name]['pressure_max_kpa']:.2f} kPa"
+    """One line on a state of fit.json's `states`: each cushion's leak and peak pressure, or that the
+    CPAP load lifts it off (its leak figure, the orifice flow of the whole open rim, means nothing)."""
+    cells = [f"{name} lifted off by the CPAP load" if row[name].get("lifted_off") else
+             f"{name} leak {row[name]['leak_l_min']:.1f} L/min, peak {row[name]['pressure_max_kpa']:.2f} kPa"
              for name in CUSHIONS if name in row]
     cells += [f"not evaluated ({row['error']})"] if "error" in row else []
     return f"{row['name']}: {'; '.join(cells)}"
 
 
 def asleep_summary(fit: dict, leak_l_min: float = 2.0) -> str:
-    """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`,
-    its worst leak while on the face, and the states whose CPAP load lifts it off (no leak figure
-    means anything there: the mask is off)."""
+    """One line on the states of the sleeping face: in how many each cushion leaks over `leak_l_min`
+    (a state whose CPAP load lifts it off counts), its worst leak while on the face, and the states
+    that lift it off (no leak figure means anything there: the mask is off)."""
     states = fit.get("states", [])[1:]
     parts = []
     for name in CUSHIONS:
         rows = [row for row in states if name in row]
+        if not rows:
+            continue
         on = [row for row in rows if not row[name].get("lifted_off")]
         off = [row["name"] for row in rows if row[name].get("lifted_off")]
-        if rows:
-            over = sum(row[name]["leak_l_min"] > leak_l_min for row in on) + len(off)
-            notes = [f"worst on the face: {w['name']}, {w[name]['leak_l_min']:.1f} L/min"
-                     for w in [max(on, key=lambda row: row[name]["leak_l_min"])] if on]
-            notes += [f"lifted off by the CPAP load: {', '.join(off)}"] if off else []
-            parts.append(f"{name} leaks over {leak_l_min:g} L/min in {over} of {len(rows)} ({'; '.join(notes)})")
+        notes = []
+        if on:
+            worst = max(on, key=lambda row: row[name]["leak_l_min"])
+            notes.append(f"worst on the face: {worst['name']}, {worst[name]['leak_l_min']:.1f} L/min")
+        if off:
+            notes.append(f"lifted off by the CPAP load: {', '.join(off)}")
+        over = sum(row[name]["leak_l_min"] > leak_l_min for row in on) + len(off)
+        parts.append(f"{name} leaks over {leak_l_min:g} L/min in {over} of {len(rows)} ({'; '.join(notes)})")
     return f"asleep: {'; '.join(parts)}" if parts else "asleep: not evaluated"
 
 

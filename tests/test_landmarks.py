@@ -379,7 +379,7 @@ def test_no_scan_below_the_nose_is_refused_in_words(tmp_path, phantom1):
 def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
     """The phantom's alignment passes the face check; the same template shrunk to 0.57 about its
     nose tip (what MediaPipe on a shaded render once gave) still lies on skin, but not at an adult's size."""
-    from cpapfit.align.check import NOSE_TIP, check_face, require_face
+    from cpapfit.align.check import NOSE_TIP, check_face, require_face, scale_question
     from cpapfit.similarity import Similarity
 
     ph = phantom1
@@ -394,7 +394,7 @@ def test_a_face_found_at_half_its_size_is_not_a_face(tmp_path, phantom1):
     with pytest.raises(InputError, match="are its units right"):
         require_face(shrunk, "a render")
     with pytest.raises(InputError, match="are its depth scale and intrinsics this camera's"):
-        require_face(shrunk, "a capture", capture=True)
+        require_face(shrunk, "a capture", scale_question(scan))
 
 
 def test_a_noisy_depth_camera_does_not_hide_the_face(tmp_path):

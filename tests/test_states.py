@@ -142,16 +142,18 @@ def test_the_headgear_force_seals_the_states_it_can_within_the_awake_peak_limit(
 
 
 def test_the_design_line_says_in_how_many_states_each_cushion_leaks():
-    from cpapfit.commands import asleep_summary
+    from cpapfit.commands import asleep_summary, state_summary
 
     def row(name, custom, stock, lifted=False):
-        return {"name": name, "custom": {"leak_l_min": custom, "lifted_off": lifted}, "stock": {"leak_l_min": stock, "lifted_off": False}}
+        return {"name": name, "custom": {"leak_l_min": custom, "lifted_off": lifted, "pressure_max_kpa": 0.0},
+                "stock": {"leak_l_min": stock, "lifted_off": False, "pressure_max_kpa": 0.0}}
 
     fit = {"states": [row("awake", 0.0, 9.0), row("a", 0.5, 3.0), row("b", 12.0, 1.0), {"name": "c", "error": "no skin"},
                       row("d", 1800.0, 0.0, lifted=True)]}
     assert asleep_summary(fit) == ("asleep: custom leaks over 2 L/min in 2 of 3 (worst on the face: b, 12.0 L/min; "
                                    "lifted off by the CPAP load: d); "
                                    "stock leaks over 2 L/min in 1 of 3 (worst on the face: a, 3.0 L/min)")
+    assert state_summary(fit["states"][4]) == "d: custom lifted off by the CPAP load; stock leak 0.0 L/min, peak 0.00 kPa"
     assert asleep_summary({}) == "asleep: not evaluated"
 
 

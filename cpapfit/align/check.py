@@ -190,11 +190,21 @@ def _first(heights) -> float:
     return next((h for h in heights if np.isfinite(h)), np.nan)
 
 
-def require_face(check: FaceCheck, how: str, capture: bool = False, across_mm: float = np.nan) -> None:
-    """Raise a clear error when the alignment does not lie on a face (of a `capture`: an RGB-D frame;
-    `across_mm`: a mesh's or cloud's robust extent, mm: a scene or a body is to be cropped to the head)."""
+def scale_question(scan: Scan) -> str:
+    """What to ask of a scan on which the face found is not an adult's size: its depth scale and
+    intrinsics (a capture, a sweep, a RealSense recording: millimetres from a depth scale), or its
+    units (a mesh or a point cloud), saying how they were decided."""
+    if scan.is_capture or "from depth_scale" in scan.units_note:
+        return "are its depth scale and intrinsics this camera's?"
+    return f"are its units right? {scan.units_note or 'units: ' + scan.units}; state them with --units"
+
+
+def require_face(check: FaceCheck, how: str, question: str = "are its units right? state them with --units",
+                 across_mm: float = np.nan) -> None:
+    """Raise a clear error when the alignment does not lie on a face, asking `question`
+    (`scale_question`) where the face found is not an adult's size; `across_mm`: a mesh's or cloud's
+    robust extent, mm: a scene or a body is to be cropped to the head."""
     if not check.is_face:
-        scale = "are its depth scale and intrinsics this camera's?" if capture else "are its units right? state them with --units"
-        units = "" if SCALE_RANGE[0] <= check.scale <= SCALE_RANGE[1] else f" (or {scale})"
+        units = "" if SCALE_RANGE[0] <= check.scale <= SCALE_RANGE[1] else f" (or {question})"
         crop = f"; the scan is {across_mm:.0f} mm across, more than a head ({HEAD_MM:.0f}): crop it to the head" if across_mm > HEAD_MM else ""
         raise InputError(f"no face found ({how}): {check.describe()}{crop}; is this a face scan, facing the sensor{units}?")

@@ -13,7 +13,7 @@ from ..landmarks.cloud import facing_surface
 from ..landmarks.noise import LandmarkNoise, with_noise
 from .fallback import fallback_alignment
 from ..landmarks.types import WITHOUT_COLOURS, Landmarks
-from .check import FaceCheck, check_face, require_face
+from .check import FaceCheck, check_face, require_face, scale_question
 from ..similarity import Similarity, fit_similarity
 from ..thresholds import FRONT_SIZE, DISAGREE_MM, SCALE_RANGE
 
@@ -47,7 +47,7 @@ def initial_alignment(scan: Scan, template: Template, user: Landmarks | None = N
     found, check, failed, agreed = _first_face(scan, template, candidates, central)
     if not agreed:
         across = np.nan if check.is_face or scan.is_capture else robust_extent(scan.vertices)  # a capture's depth has the room in it
-        require_face(check, f"landmarks by {found.landmarks.path}", scan.is_capture, across)
+        require_face(check, f"landmarks by {found.landmarks.path}", scale_question(scan), across)
     if found.landmarks.path == "fallback":
         require_agreement(template, found.similarity, failed, _size_doubt(scan, failed))
     rejected = f"the face found by {' and '.join(dict.fromkeys(label for label, _ in failed))} failed the face check" if failed else ""
@@ -108,15 +108,13 @@ def require_agreement(template: Template, shape: Similarity, failed: list[tuple[
 
 def _size_doubt(scan: Scan, failed: list[tuple[str, Detection]]) -> str:
     """Where a detected face failed the face check at a size no adult's face is (the template scaled
-    outside SCALE_RANGE), the question that asks after the scan's scale: its units (a mesh or a
-    point cloud, with how they were decided) or its depth scale (a capture); else ""."""
+    outside SCALE_RANGE), what to ask of the scan's scale (`scale_question`); else ""."""
     odd = [(label, det.similarity.scale) for label, det in failed if not SCALE_RANGE[0] <= det.similarity.scale <= SCALE_RANGE[1]]
     if not odd:
         return ""
     label, scale = odd[0]
-    what = ("its depth scale and intrinsics this camera's?" if scan.is_capture
-            else f"its units right ({scan.units_note or scan.units})? state them with --units;")
-    return f"the face found by {label} is x{scale:.2f} the template's size (an adult's: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g}): are {what}"
+    return (f"the face found by {label} is x{scale:.2f} the template's size (an adult's: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g}): "
+            f"{scale_question(scan)};")
 
 
 def _apart(template: Template, one: Similarity, other: Similarity) -> float:

@@ -17,9 +17,9 @@ membrane, so that the template's midline is the face's and an unseen part of the
 shape of the side seen, while the skin is free to be asymmetric once the membrane is soft. And a
 morphable start (align/morphable.py: the template's shape fitted within real faces' identity modes,
 begun at the similarity): the elastic ICP runs from it too and keeps that run if it is clearly
-better over both its terms (`MorphableParams.margin`, `clearly_better`): it bends less from its
-start and lies closer to the scan than the affine start's, the face then being more like the
-model's faces than the template's. With all six off (`affine=None`, `detected_landmark_factor=1`,
+better over both its terms (`clearly_better`): its bending from its start and its mean distance
+from the scan, each as a share of the affine start's run's, multiply to `MorphableParams.margin`
+under 1, the face then being more like the model's faces than the template's. With all six off (`affine=None`, `detected_landmark_factor=1`,
 `user_trust_mm=inf`, `coarse_gates=None`, `symmetry=0`, `morphable=None`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);

@@ -171,7 +171,7 @@ class StateFit:
 
 def state_faces(face: Face, states: tuple[FaceState, ...]) -> dict[FaceState, Face]:
     """{state: the `face` in it} (`state_face`) for each of `states`: made once, the faces and their
-    spatial indexes serve every cushion pressed onto them."""
+    spatial indexes serve the custom cushion's membrane sizing and its evaluation."""
     motion = motions(np.asarray(face.registered.vertices))
     return {state: state_face(face, motion.of(state)) for state in states}
 
