@@ -25,9 +25,9 @@ CONNECT_TIMEOUT_S = 10  # to reach a scheduler, and for it to have a worker
 
 
 def find_scans(input_dir: Path, out_dir: Path) -> tuple[dict[str, Path], list[str]]:
-    """The scans in `input_dir` by output folder name (mesh files, capture folders and sweeps,
-    RealSense recordings; hidden
-    entries and `out_dir` left out), and the names of the other entries (not scans)."""
+    """The scans in `input_dir` by output folder name (mesh files, capture folders, sweeps and
+    RealSense recordings; hidden entries and `out_dir` left out), and the names of the other
+    entries (not scans)."""
     if not input_dir.is_dir():
         raise InputError(f"{input_dir}: no such folder; INPUT_DIR is a folder of scans (mesh files, capture folders)")
     inp, out = input_dir.resolve(), out_dir.resolve()

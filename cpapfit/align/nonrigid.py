@@ -19,8 +19,9 @@ morphable start (align/morphable.py: the template's shape fitted within real fac
 begun at the similarity): the elastic ICP runs from it too and keeps that run if it is clearly
 better over both its terms (`clearly_better`): its bending from its start and its mean distance
 from the scan, each as a share of the affine start's run's, multiply to `MorphableParams.margin`
-under 1, the face then being more like the model's faces than the template's. With all six off (`affine=None`, `detected_landmark_factor=1`,
-`user_trust_mm=inf`, `coarse_gates=None`, `symmetry=0`, `morphable=None`) this is the paper's method.
+under 1, the face then being more like the model's faces than the template's. With all six off
+(`affine=None`, `detected_landmark_factor=1`, `user_trust_mm=inf`, `coarse_gates=None`,
+`symmetry=0`, `morphable=None`) this is the paper's method.
 
 Each iteration: (1) correspondences (k-d tree, or projection onto the depth grid of a capture);
 (2) reject pairs > 5 mm apart, with normals > 25 deg apart (coarse gates: wider while stiff), or on the scan's boundary;

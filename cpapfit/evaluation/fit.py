@@ -2,6 +2,7 @@
 and the pre-load that makes the custom cushion press evenly (pressure compensation)."""
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import trimesh
@@ -127,14 +128,9 @@ def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     def opened(force: float) -> bool:
         return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa), rim, params.cpap_kpa).max() > 0
 
-    lo = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
-    hi = params.max_force_n
-    if opened(hi):
+    if opened(params.max_force_n):
         return None
-    while hi - lo > tol_n:
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if opened(mid) else (lo, mid)
-    return hi
+    return _bisected(opened, _cpap_force(rim, params), params.max_force_n, tol_n)[1]
 
 
 def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, peak_kpa: float, tol_n: float = 0.01) -> float:
@@ -144,13 +140,22 @@ def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     def over(force: float) -> bool:
         return _press_rim(rim, k, width_mm, force, params.cpap_kpa).pressure_kpa.max() > peak_kpa
 
-    lo, hi = params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2, params.max_force_n
-    if not over(hi):
-        return hi
+    if not over(params.max_force_n):
+        return params.max_force_n
+    return _bisected(lambda force: not over(force), _cpap_force(rim, params), params.max_force_n, tol_n)[0]
+
+
+def _cpap_force(rim: RimContact, params: FitParams) -> float:
+    """N: the CPAP pressure's push on the area the rim seals, the least force that holds the mask on."""
+    return params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
+
+
+def _bisected(below: Callable[[float], bool], lo: float, hi: float, tol_n: float) -> tuple[float, float]:
+    """(lo, hi) N within `tol_n` of where `below(force)`, true up to a force and false past it, turns false."""
     while hi - lo > tol_n:
         mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if over(mid) else (mid, hi)
-    return lo
+        lo, hi = (mid, hi) if below(mid) else (lo, mid)
+    return lo, hi
 
 
 def recommended_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams) -> float:
