@@ -19,6 +19,11 @@ mapped onto the ICT face, `template_truth`):
 - depth_ratio, face_size: the face's proportions against the template's (`proportions.py`), and
   true_depth_ratio: the truth's over the same template vertices (those the registration matched).
 Silently wrong: made, not flagged, band mean over 2 mm; misplaced: band mean over 5 mm (made at all).
+Awake, the custom cushion at its force on the scan: leak, peak pressure and window (`fit.json`'s), and
+how deep the fit model presses each rim point (its travel along the axis times |cos|) against that
+point's exact depth under the scan at the equilibrium (its distance to the nearest point of the
+scan's triangles, `trimesh.proximity`): the 95th percentile and largest difference over the rim
+points in contact.
 
 Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh] [--masks nasal oronasal]
        [--model NPZ | --model shipped]
@@ -34,6 +39,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import trimesh
 from scipy.spatial.transform import Rotation
 
 from cpapfit import __version__
@@ -45,7 +51,8 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.synthetic.camera import FRAMED, to_camera
-from cpapfit.pipeline import design, place_template
+from cpapfit.evaluation.mechanics import COS_MIN
+from cpapfit.pipeline import design, face_for, place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import MASKS, load_template
 
@@ -110,7 +117,23 @@ def _measured(row: dict, scan, placed, truth: np.ndarray, marks: np.ndarray) -> 
         **{g.code: g.value for g in d.quality.gates if g.code in ("depth_ratio", "face_size")},
         "true_depth_ratio": proportions(template.vertices, d.alignment.similarity, replace(d.registration, vertices=truth)).depth_ratio,
         "leak_l_min": fit["leak_l_min"], "peak_kpa": fit["pressure_max_kpa"], "window": fit["window_fraction"],
+        **depth_error(d.fits["custom"], face_for(scan, d.alignment, d.registration).scan),
     }
+
+
+def depth_error(fit, scan: trimesh.Trimesh) -> dict:
+    """The fit model's depth of each rim point in contact (mm: travel along the axis times |cos|)
+    against its exact depth under the `scan` mesh at the equilibrium: p95 and largest |difference|."""
+    rim, c = fit.rim, fit.rim.covered
+    cos = np.maximum(rim.cos[c], COS_MIN)
+    travel = fit.pressed.pressure_kpa / (fit.stiffness.effective[c] * cos)
+    at = rim.points[c] - (travel + rim.clearance[c])[:, None] * rim.axis  # each rim point where the mask came to rest
+    nearest, distance, tri = trimesh.proximity.closest_point(scan, at)
+    out = np.asarray(scan.face_normals)[tri]
+    out *= np.sign(np.median(out @ rim.axis))  # out of the face
+    exact = distance * np.where(np.einsum("ij,ij->i", at - nearest, out) < 0, 1.0, -1.0)
+    error = np.abs(travel * cos - exact)[travel > 0]
+    return {"depth_err_p95_mm": float(np.percentile(error, 95)), "depth_err_max_mm": float(error.max())}
 
 
 def table(rows: list[dict]) -> str:
@@ -129,6 +152,22 @@ def table(rows: list[dict]) -> str:
             f"| {len(rs) - len(made)} | {mean('band_mm')} | {mean('band_p95_mm')} | {mean('curve_mm')} | {mean('landmarks_mm')} "
             f"| {np.mean([r['truth_landmarks_mm'] for r in rs]):.2f} | {sum(r['band_mm'] > 5.0 for r in made)} "
             f"| {sum(r['band_mm'] > 2.0 and not r['flags'] for r in made)} |")
+    return "\n".join(out)
+
+
+def awake(rows: list[dict]) -> str:
+    """Markdown: the custom cushions awake, per (kind, mask)."""
+    out = ["| scans | mask | n | peak median (kPa) | peak over 4.3 kPa | largest peak (kPa) | window under 95 % | leak over 1 L/min "
+           "| depth error p95, median of designs (mm) | largest depth error (mm) |", "|---" * 10 + "|"]
+    groups = {}
+    for r in rows:
+        if r["outcome"] == "made":
+            groups.setdefault((r["kind"], r["mask"]), []).append(r)
+    for (kind, mask), rs in groups.items():
+        col = lambda key: np.array([r[key] for r in rs])  # noqa: E731
+        out.append(f"| {kind} | {mask} | {len(rs)} | {np.median(col('peak_kpa')):.2f} | {np.sum(col('peak_kpa') > 4.3)} "
+                   f"| {col('peak_kpa').max():.2f} | {np.sum(col('window') < 0.95)} | {np.sum(col('leak_l_min') > 1.0)} "
+                   f"| {np.median(col('depth_err_p95_mm')):.2f} | {col('depth_err_max_mm').max():.2f} |")
     return "\n".join(out)
 
 
@@ -164,6 +203,8 @@ def main() -> None:
         off = np.array([r["depth_ratio"] - r["true_depth_ratio"] for r in made])
         print(f"\ndepth ratio read against the truth's over the same vertices: mean {off.mean():+.3f}, largest |difference| "
               f"{np.abs(off).max():.3f}; read {min(r['depth_ratio'] for r in made):.3f}-{max(r['depth_ratio'] for r in made):.3f}")
+    print()
+    print(awake(rows))
     print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
 
 

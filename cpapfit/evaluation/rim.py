@@ -5,7 +5,8 @@ stock cushion) is refined to ~1 mm edges; every vertex of its wall near the face
 RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin.
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
-pushed on. Evaluating the written mesh (not the design's internal curve) means `design` and
+pushed on; how far it travels to touch is its distance from the skin nearest it over the |cos|
+of that skin's normal (`_nearest_skin`: along the axis, curved skin misjudges it). Evaluating the written mesh (not the design's internal curve) means `design` and
 `evaluate` measure the same thing. A membrane (`membrane.py`: the mesh thinner than
 MEMBRANE_MAX_MM) is not the rim: it is measured, per sector, for the seal it adds.
 """
@@ -21,6 +22,7 @@ from ..frozen import freeze_arrays
 from ..tangents import across
 from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_thickness_mm
 from ..thresholds import MIN_COVERED
+from .mechanics import COS_MIN
 
 SECTORS = 256
 REFINE_MM = 1.0  # longest cushion edge after refinement
@@ -35,17 +37,20 @@ RIM_BAND_MM = 15.0  # a rim point is a wall vertex at most this far up the axis 
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
+CANDIDATES = 8  # the nearest skin on a mesh: on the triangles around this many nearest vertices
+STRAY_MM = 1.0  # the nearest skin this far off the plane of the scan around it is a spike, not skin
 
 
 @dataclass(frozen=True)
 class RimContact:
     """A cushion's contact line over the face, one point per sector around the mask axis.
 
-    points: (K, 3) mm rim points on the cushion; skin: (K, 3) mm skin below each, along -axis;
-    clearance: (K,) mm from rim to skin along the axis (negative: rim inside the skin; NaN where
-    no skin was found, i.e. not covered); cos: (K,) |cos| of the angle between the skin's normal
-    and the axis (the scan's, averaged over NORMAL_MM around the skin point; the registered
-    template's where the scan has too little there); ds: (K,) mm of rim length each point stands
+    points: (K, 3) mm rim points on the cushion; skin: (K, 3) mm where each would touch the skin,
+    along -axis; clearance: (K,) mm the rim travels along the axis to touch the skin: its distance
+    from the nearest skin over cos (negative: rim inside the skin; NaN where no skin was found
+    along the axis, i.e. not covered; `_nearest_skin`); cos: (K,) |cos| of the angle between that
+    skin's normal and the axis (the scan's, averaged over NORMAL_MM; the registered template's
+    where the scan has too little there); ds: (K,) mm of rim length each point stands
     for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
@@ -161,8 +166,10 @@ def rim_in(
                          f"(at least {100 * MIN_COVERED:.0f} % needed): {_why_uncovered(scan)}")
     rim_uv = (pts - pts.mean(axis=0)) @ plane.T
     membrane = rim_membrane(zone.thin, zone.thin_mm, pts, MEMBRANE_SPREAD)
-    cos = _skin_cos(skin, scan, axis)
+    cos = np.abs(_skin_planes(skin, scan)[0] @ axis)
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
+    clearance, cos = _nearest_skin(pts, clearance, cos, scan, axis)
+    skin = pts - clearance[:, None] * axis
     return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
@@ -281,28 +288,78 @@ def _skin_below(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, 
     return clearance, points - clearance[:, None] * axis
 
 
-def _skin_cos(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray) -> np.ndarray:
-    """(K,) |cos| between the unit `axis` and the scan's normal over NORMAL_MM around each of (K, 3)
-    skin points (NaN rows allowed): a mesh's vertex normals there that face as the nearest vertex's
-    does, summed (not the underside of a wing of the nose beside the groove under it); a point
-    cloud's least-spread direction of its points there (NaN with fewer than NORMAL_POINTS)."""
-    out = np.full(len(skin), np.nan)
+def _skin_planes(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
+    """The scan's plane over NORMAL_MM around each of (K, 3) skin points (NaN rows allowed): (K, 3)
+    unit normals, of either sign (NaN where none), and (K, 3) the mean of the scan's points there
+    (the point itself where there are none). On a mesh, its vertex normals there that face as the
+    nearest vertex's does, summed (not the underside of a wing of the nose beside the groove under
+    it), or with no vertex there (a coarse mesh) the nearest triangle's; of a point cloud, the
+    least-spread direction of its points there (none with fewer than NORMAL_POINTS). mm."""
+    normals, centres = np.full(skin.shape, np.nan), skin.copy()
     found = np.flatnonzero(np.isfinite(skin).all(axis=1))
-    points = np.asarray(scan.vertices)
-    tree = scan.kdtree if isinstance(scan, trimesh.Trimesh) else cKDTree(points)
+    points, tree = np.asarray(scan.vertices), scan.kdtree
     nearest = tree.query(skin[found])[1]
     for i, near, idx in zip(found, nearest, tree.query_ball_point(skin[found], NORMAL_MM)):
-        if isinstance(scan, trimesh.Trimesh):
-            normals = scan.vertex_normals[[near, *idx]]
-            normal = normals[normals @ normals[0] > 0].sum(axis=0)
+        if len(idx):
+            centres[i] = points[idx].mean(axis=0)
+        if isinstance(scan, trimesh.Trimesh) and len(idx):
+            around = scan.vertex_normals[[near, *idx]]
+            normal = around[around @ around[0] > 0].sum(axis=0)
+        elif isinstance(scan, trimesh.Trimesh):
+            normal = scan.face_normals[_closest_points(skin[i : i + 1], scan)[1][0]]
         elif len(idx) >= NORMAL_POINTS:
             normal = np.linalg.svd(points[idx] - points[idx].mean(axis=0), full_matrices=False)[2][-1]
         else:
             continue
         length = np.linalg.norm(normal)
         if length > 0:  # not a degenerate patch whose normals cancel
-            out[i] = abs(normal @ axis) / length
-    return out
+            normals[i] = normal / length
+    return normals, centres
+
+
+def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
+                  axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(clearance (K,) mm, |cos| (K,)) of (K, 3) rim points, those inside the skin measured to the
+    skin nearest each. Along the axis, a rim point's depth times the |cos| of the skin's normal
+    there is its depth under that skin's tangent plane: its distance from the skin only where the
+    skin is flat within that depth (under the shoulder of a wing of the nose it overstates it
+    2-fold, at its foot it understates it). The depth of a point inside the skin is its distance
+    to the nearest skin, and it grows, as the mask moves along the axis, by the |cos| of the scan's
+    NORMAL_MM normal at that skin: the clearance is their ratio. Kept where the skin along the axis
+    and the nearest skin agree that the point is inside, the nearest faces the axis at least
+    COS_MIN and lies within STRAY_MM of the plane of the scan around it (else a torn edge's
+    spike). A point in the air keeps its reading along the axis, a median under the flange that
+    one stray sample does not move. (K,) `clearance` and `cos`: as found along the axis (NaN
+    clearances stay)."""
+    inside = np.flatnonzero(clearance < 0)
+    if not len(inside):
+        return clearance, cos
+    nearest = _closest_points(points[inside], scan)[0]
+    average, centre = _skin_planes(nearest, scan)
+    average *= np.where(average @ axis < 0, -1.0, 1.0)[:, None]  # out of the face, towards the mask
+    offset = points[inside] - nearest
+    depth, facing = np.linalg.norm(offset, axis=1), average @ axis
+    stray = np.abs(np.einsum("ij,ij->i", nearest - centre, average)) > STRAY_MM
+    kept = (np.einsum("ij,ij->i", offset, average) < 0) & (facing >= COS_MIN) & ~stray
+    clearance, cos = clearance.copy(), cos.copy()
+    clearance[inside[kept]] = -depth[kept] / facing[kept]
+    cos[inside[kept]] = facing[kept]
+    return clearance, cos
+
+
+def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
+    """((K, 3) the scan's point nearest each of (K, 3) points, (K,) its triangle): on a mesh, on the
+    triangles around its CANDIDATES nearest vertices; of a point cloud, its nearest point (and no
+    triangle: -1). mm."""
+    vertices = np.asarray(scan.vertices)
+    if isinstance(scan, trimesh.PointCloud):
+        return vertices[scan.kdtree.query(points)[1]], np.full(len(points), -1)
+    around = np.asarray(scan.vertex_faces)[scan.kdtree.query(points, k=min(CANDIDATES, len(vertices)))[1]].reshape(len(points), -1)
+    row, column = np.nonzero(around >= 0)
+    on = trimesh.triangles.closest_point(np.asarray(scan.triangles)[around[row, column]], points[row])
+    order = np.lexsort((np.linalg.norm(on - points[row], axis=1), row))
+    first = order[np.unique(row[order], return_index=True)[1]]
+    return on[first], around[row[first], column[first]]
 
 
 def _arc_lengths(loop: np.ndarray) -> np.ndarray:
