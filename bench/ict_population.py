@@ -123,16 +123,23 @@ def _measured(row: dict, scan, placed, truth: np.ndarray, marks: np.ndarray) -> 
 
 def depth_error(fit, scan: trimesh.Trimesh) -> dict:
     """The fit model's depth of each rim point in contact (mm: travel along the axis times |cos|)
-    against its exact depth under the `scan` mesh at the equilibrium: p95 and largest |difference|."""
+    against its distance under the `scan` mesh at the equilibrium (which side of the skin: the
+    vertex normals at the nearest point): p95 and largest |difference| (NaN with no contact). Both
+    read the nearest skin, so this measures the model's linear law and its skin normals, not which
+    skin it should have pressed."""
     rim, c = fit.rim, fit.rim.covered
     cos = np.maximum(rim.cos[c], COS_MIN)
     travel = fit.pressed.pressure_kpa / (fit.stiffness.effective[c] * cos)
     at = rim.points[c] - (travel + rim.clearance[c])[:, None] * rim.axis  # each rim point where the mask came to rest
     nearest, distance, tri = trimesh.proximity.closest_point(scan, at)
-    out = np.asarray(scan.face_normals)[tri]
+    corners = np.asarray(scan.faces)[tri]
+    weights = trimesh.triangles.points_to_barycentric(np.asarray(scan.vertices)[corners], nearest)
+    out = np.einsum("kj,kjc->kc", weights, np.asarray(scan.vertex_normals)[corners])
     out *= np.sign(np.median(out @ rim.axis))  # out of the face
     exact = distance * np.where(np.einsum("ij,ij->i", at - nearest, out) < 0, 1.0, -1.0)
     error = np.abs(travel * cos - exact)[travel > 0]
+    if not len(error):
+        return {"depth_err_p95_mm": float("nan"), "depth_err_max_mm": float("nan")}
     return {"depth_err_p95_mm": float(np.percentile(error, 95)), "depth_err_max_mm": float(error.max())}
 
 

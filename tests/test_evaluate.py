@@ -109,6 +109,7 @@ def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():
     front = np.linalg.norm(rim.points[:, :2] - [-RING_MM, 0.0], axis=1) < 3.0
     assert behind.any() and front.any()
     assert not rim.covered[behind].any()
+    # 0.02: the points 2-3 mm from the step's wall read its slope into their skin's normal
     assert rim.covered[front].all() and rim.clearance[front] == pytest.approx(-3.0, abs=0.02)
 
 
@@ -278,6 +279,18 @@ def test_a_rim_point_beside_a_ridge_is_pressed_by_its_distance_from_the_skin():
     assert -clearance * cos - exact == pytest.approx([2.07, 0.69, -0.62, -0.27], abs=0.05)
     clearance, cos = _nearest_skin(points, clearance, cos, skin, axis)
     assert -clearance * cos == pytest.approx(exact, abs=0.05)
+
+
+def test_a_rim_pressed_into_a_point_cloud_reads_its_depth_not_its_distance_to_a_sample():
+    """A flat point cloud 1.3 mm apart: rim points 0.2-1 mm into it, up to 0.9 mm across from the
+    nearest sample, read their depth under the plane of the points (not 0.5 mm deeper)."""
+    grid = np.stack(np.meshgrid(np.arange(-20, 21, 1.3), np.arange(-20, 21, 1.3)), -1).reshape(-1, 2)
+    cloud = trimesh.PointCloud(np.column_stack([grid, np.zeros(len(grid))]))
+    points = np.array([[0.4, 0.5, -0.2], [-0.6, 0.3, -1.0], [0.65, 0.65, -0.5]])
+    axis = np.array([0.0, 0.0, 1.0])
+    clearance, under = _skin_below(points, cloud, axis)
+    clearance, cos = _nearest_skin(points, clearance, np.abs(_skin_planes(under, cloud)[0] @ axis), cloud, axis)
+    assert clearance * cos == pytest.approx([-0.2, -1.0, -0.5], abs=0.01)
 
 
 def test_rim_over_a_sloping_point_cloud_measures_the_same_clearance_as_over_its_mesh():

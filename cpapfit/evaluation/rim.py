@@ -5,9 +5,10 @@ stock cushion) is refined to ~1 mm edges; every vertex of its wall near the face
 RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin.
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
-pushed on; how far it travels to touch is its distance from the skin nearest it over the |cos|
-of that skin's normal (`_nearest_skin`: along the axis, curved skin misjudges it). Evaluating the written mesh (not the design's internal curve) means `design` and
-`evaluate` measure the same thing. A membrane (`membrane.py`: the mesh thinner than
+pushed on. How far inside the skin it is: its distance to the nearest skin, over the |cos| of
+that skin's normal (`_nearest_skin`; along the axis, curved skin misjudges it). Evaluating the
+written mesh (not the design's internal curve) means `design` and `evaluate` measure the same
+thing. A membrane (`membrane.py`: the mesh thinner than
 MEMBRANE_MAX_MM) is not the rim: it is measured, per sector, for the seal it adds.
 """
 
@@ -45,13 +46,13 @@ STRAY_MM = 1.0  # the nearest skin this far off the plane of the scan around it 
 class RimContact:
     """A cushion's contact line over the face, one point per sector around the mask axis.
 
-    points: (K, 3) mm rim points on the cushion; skin: (K, 3) mm where each would touch the skin,
-    along -axis; clearance: (K,) mm the rim travels along the axis to touch the skin: its distance
-    from the nearest skin over cos (negative: rim inside the skin; NaN where no skin was found
-    along the axis, i.e. not covered; `_nearest_skin`); cos: (K,) |cos| of the angle between that
-    skin's normal and the axis (the scan's, averaged over NORMAL_MM; the registered template's
-    where the scan has too little there); ds: (K,) mm of rim length each point stands
-    for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
+    points: (K, 3) mm rim points on the cushion; skin: (K, 3) mm skin below each, along -axis;
+    clearance: (K,) mm the rim travels along the axis to touch the skin (negative: rim inside the
+    skin, where its depth is its distance to the nearest skin over cos, `_nearest_skin`; NaN where
+    no skin was found along the axis, i.e. not covered); cos: (K,) |cos| of the angle between the
+    axis and the normal of the skin the clearance is measured to (the scan's, averaged over
+    NORMAL_MM; the registered template's where the scan has too little there); ds: (K,) mm of rim
+    length each point stands for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
 
@@ -169,7 +170,6 @@ def rim_in(
     cos = np.abs(_skin_planes(skin, scan)[0] @ axis)
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
     clearance, cos = _nearest_skin(pts, clearance, cos, scan, axis)
-    skin = pts - clearance[:, None] * axis
     return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
@@ -306,7 +306,8 @@ def _skin_planes(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -
             around = scan.vertex_normals[[near, *idx]]
             normal = around[around @ around[0] > 0].sum(axis=0)
         elif isinstance(scan, trimesh.Trimesh):
-            normal = scan.face_normals[_closest_points(skin[i : i + 1], scan)[1][0]]
+            own = _closest_points(skin[i : i + 1], scan)[1][0]
+            normal = scan.face_normals[own] if own >= 0 else np.zeros(3)
         elif len(idx) >= NORMAL_POINTS:
             normal = np.linalg.svd(points[idx] - points[idx].mean(axis=0), full_matrices=False)[2][-1]
         else:
@@ -320,27 +321,24 @@ def _skin_planes(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -
 def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
                   axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(clearance (K,) mm, |cos| (K,)) of (K, 3) rim points, those inside the skin measured to the
-    skin nearest each. Along the axis, a rim point's depth times the |cos| of the skin's normal
-    there is its depth under that skin's tangent plane: its distance from the skin only where the
-    skin is flat within that depth (under the shoulder of a wing of the nose it overstates it
-    2-fold, at its foot it understates it). The depth of a point inside the skin is its distance
-    to the nearest skin, and it grows, as the mask moves along the axis, by the |cos| of the scan's
-    NORMAL_MM normal at that skin: the clearance is their ratio. Kept where the skin along the axis
-    and the nearest skin agree that the point is inside, the nearest faces the axis at least
-    COS_MIN and lies within STRAY_MM of the plane of the scan around it (else a torn edge's
-    spike). A point in the air keeps its reading along the axis, a median under the flange that
-    one stray sample does not move. (K,) `clearance` and `cos`: as found along the axis (NaN
-    clearances stay)."""
+    nearest skin: its distance (a point cloud's: to the plane of its points there) over the |cos|
+    of the scan's NORMAL_MM normal there, which is how fast that depth grows as the mask moves
+    along the axis. Kept where both readings put the point inside, that skin faces the axis at
+    least COS_MIN and lies within STRAY_MM of the plane of the scan around it (else a torn edge's
+    spike); elsewhere, and for points in the air, the reading along the axis (`clearance`, `cos`
+    (K,); NaN clearances stay)."""
     inside = np.flatnonzero(clearance < 0)
     if not len(inside):
         return clearance, cos
-    nearest = _closest_points(points[inside], scan)[0]
-    average, centre = _skin_planes(nearest, scan)
-    average *= np.where(average @ axis < 0, -1.0, 1.0)[:, None]  # out of the face, towards the mask
-    offset = points[inside] - nearest
-    depth, facing = np.linalg.norm(offset, axis=1), average @ axis
-    stray = np.abs(np.einsum("ij,ij->i", nearest - centre, average)) > STRAY_MM
-    kept = (np.einsum("ij,ij->i", offset, average) < 0) & (facing >= COS_MIN) & ~stray
+    nearest, _ = _closest_points(points[inside], scan)
+    normal, centre = _skin_planes(nearest, scan)
+    normal *= np.where(normal @ axis < 0, -1.0, 1.0)[:, None]  # out of the face, towards the mask
+    offset = points[inside] - (centre if isinstance(scan, trimesh.PointCloud) else nearest)
+    across = np.einsum("ij,ij->i", offset, normal)
+    depth = -across if isinstance(scan, trimesh.PointCloud) else np.linalg.norm(offset, axis=1)
+    facing = normal @ axis
+    stray = np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) > STRAY_MM
+    kept = (across < 0) & (facing >= COS_MIN) & ~stray
     clearance, cos = clearance.copy(), cos.copy()
     clearance[inside[kept]] = -depth[kept] / facing[kept]
     cos[inside[kept]] = facing[kept]
@@ -348,18 +346,21 @@ def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, sc
 
 
 def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
-    """((K, 3) the scan's point nearest each of (K, 3) points, (K,) its triangle): on a mesh, on the
-    triangles around its CANDIDATES nearest vertices; of a point cloud, its nearest point (and no
-    triangle: -1). mm."""
+    """((K, 3) mm the scan's point nearest each of (K, 3) points, (K,) its triangle or -1): on a
+    mesh, on the triangles around its CANDIDATES nearest vertices (a vertex in no triangle: itself);
+    of a point cloud, its nearest point."""
     vertices = np.asarray(scan.vertices)
+    near = scan.kdtree.query(points, k=min(CANDIDATES, len(vertices)))[1].reshape(len(points), -1)
+    out, tri = vertices[near[:, 0]], np.full(len(points), -1)
     if isinstance(scan, trimesh.PointCloud):
-        return vertices[scan.kdtree.query(points)[1]], np.full(len(points), -1)
-    around = np.asarray(scan.vertex_faces)[scan.kdtree.query(points, k=min(CANDIDATES, len(vertices)))[1]].reshape(len(points), -1)
+        return out, tri
+    around = np.asarray(scan.vertex_faces)[near].reshape(len(points), -1)
     row, column = np.nonzero(around >= 0)
     on = trimesh.triangles.closest_point(np.asarray(scan.triangles)[around[row, column]], points[row])
     order = np.lexsort((np.linalg.norm(on - points[row], axis=1), row))
     first = order[np.unique(row[order], return_index=True)[1]]
-    return on[first], around[row[first], column[first]]
+    out[row[first]], tri[row[first]] = on[first], around[row[first], column[first]]
+    return out, tri
 
 
 def _arc_lengths(loop: np.ndarray) -> np.ndarray:
