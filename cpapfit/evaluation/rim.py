@@ -8,8 +8,8 @@ contact point in that direction: the first part of the cushion the skin meets wh
 pushed on. How far inside the skin it is: its distance to the nearest skin, over the |cos| of
 that skin's normal (`_nearest_skin`; along the axis, curved skin misjudges it). Evaluating the
 written mesh (not the design's internal curve) means `design` and `evaluate` measure the same
-thing. A membrane (`membrane.py`: the mesh thinner than
-MEMBRANE_MAX_MM) is not the rim: it is measured, per sector, for the seal it adds.
+thing. A membrane (`membrane.py`: the mesh thinner than MEMBRANE_MAX_MM) is not the rim: it is
+measured, per sector, for the seal it adds.
 """
 
 from dataclasses import dataclass
@@ -52,7 +52,8 @@ class RimContact:
     no skin was found along the axis, i.e. not covered); cos: (K,) |cos| of the angle between the
     axis and the normal of the skin the clearance is measured to (the scan's, averaged over
     NORMAL_MM; the registered template's where the scan has too little there); ds: (K,) mm of rim
-    length each point stands for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area inside the rim, across the axis;
+    length each point stands for; uv: (K, 2) mm in-plane position about the rim's centre (side,
+    up); sealed_area_mm2: area inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
 
