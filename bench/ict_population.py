@@ -51,6 +51,7 @@ from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
 from cpapfit.synthetic.camera import FRAMED, to_camera
+from cpapfit.evaluation.fit import FitParams
 from cpapfit.evaluation.mechanics import COS_MIN
 from cpapfit.pipeline import design, face_for, place_template
 from cpapfit.quality.proportions import proportions
@@ -58,6 +59,7 @@ from cpapfit.template import MASKS, load_template
 
 POINTS = (31, 33, 35, 36, 39, 42, 45, 48, 54)  # Multi-PIE: nose base, eye corners, mouth corners (no nose tip)
 INDEX = [MULTIPIE_TO_FACEMESH[p] for p in POINTS]  # their template vertices
+CAPILLARY_KPA = FitParams().capillary_kpa  # the awake peak's limit
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 
 
@@ -147,11 +149,7 @@ def table(rows: list[dict]) -> str:
     """Markdown: one line per (kind, mask) and one for all."""
     out = ["| scans | mask | n | designed | flagged | refused | band mean (mm) | band p95 (mm) | curve (mm) | landmarks (mm) "
            "| truth's landmarks (mm) | over 5 mm | silently wrong (> 2 mm) |", "|---" * 13 + "|"]
-    groups = {}
-    for r in rows:
-        groups.setdefault((r["kind"], r["mask"]), []).append(r)
-    groups[("all", "both")] = rows
-    for (kind, mask), rs in groups.items():
+    for (kind, mask), rs in (_groups(rows) | {("all", "both"): rows}).items():
         made = [r for r in rs if r["outcome"] == "made"]
         mean = lambda key: f"{np.mean([r[key] for r in made]):.2f}" if made else "-"  # noqa: E731
         out.append(
@@ -162,17 +160,21 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _groups(rows: list[dict]) -> dict:
+    """{(kind, mask): its rows}, in the order first met."""
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["kind"], r["mask"]), []).append(r)
+    return groups
+
+
 def awake(rows: list[dict]) -> str:
     """Markdown: the custom cushions awake, per (kind, mask)."""
     out = ["| scans | mask | n | peak median (kPa) | peak over 4.3 kPa | largest peak (kPa) | window under 95 % | leak over 1 L/min "
            "| depth error p95, median of designs (mm) | largest depth error (mm) |", "|---" * 10 + "|"]
-    groups = {}
-    for r in rows:
-        if r["outcome"] == "made":
-            groups.setdefault((r["kind"], r["mask"]), []).append(r)
-    for (kind, mask), rs in groups.items():
+    for (kind, mask), rs in _groups([r for r in rows if r["outcome"] == "made"]).items():
         col = lambda key: np.array([r[key] for r in rs])  # noqa: E731
-        out.append(f"| {kind} | {mask} | {len(rs)} | {np.median(col('peak_kpa')):.2f} | {np.sum(col('peak_kpa') > 4.3)} "
+        out.append(f"| {kind} | {mask} | {len(rs)} | {np.median(col('peak_kpa')):.2f} | {np.sum(col('peak_kpa') > CAPILLARY_KPA)} "
                    f"| {col('peak_kpa').max():.2f} | {np.sum(col('window') < 0.95)} | {np.sum(col('leak_l_min') > 1.0)} "
                    f"| {np.median(col('depth_err_p95_mm')):.2f} | {col('depth_err_max_mm').max():.2f} |")
     return "\n".join(out)
