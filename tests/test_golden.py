@@ -1,6 +1,6 @@
-"""Golden figures: the headline numbers of the four synthetic designs the suite makes (seeds 2 and 3,
-both masks; `tests/golden_fit.json`), so that a change that moves a figure is seen. A change meant
-to move them rewrites that file and says why in its commit."""
+"""Golden figures: the headline numbers of the three synthetic designs the suite makes (`designed`:
+seed 3 with both masks, seed 2 oronasal; `tests/golden_fit.json`), so that a change that moves a
+figure is seen. A change meant to move them rewrites that file and says why in its commit."""
 
 import json
 from pathlib import Path
