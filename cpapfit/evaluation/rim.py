@@ -321,13 +321,15 @@ def _skin_planes(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -
 
 def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
                   axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(clearance (K,) mm, |cos| (K,)) of (K, 3) rim points, those inside the skin measured to the
-    nearest skin: its distance (a point cloud's: to the plane of its points there) over the |cos|
-    of the scan's NORMAL_MM normal there, which is how fast that depth grows as the mask moves
-    along the axis. Kept where both readings put the point inside, that skin faces the axis at
+    """(clearance (K,) mm, |cos| (K,)) of (K, 3) rim points, those the axis reads inside the skin
+    measured to the nearest skin: its distance (a point cloud's: to the plane of its points there)
+    over the |cos| of the scan's NORMAL_MM normal there, which is how fast that depth grows as the
+    mask moves along the axis. Where that skin puts the point on its mask side, the axis passed
+    through a sheet whose far side the scan lacks (the wing of the nose seen from above, over the
+    groove beside it): the point is in the air by as much. Kept where that skin faces the axis at
     least COS_MIN and lies within STRAY_MM of the plane of the scan around it (else a torn edge's
-    spike); elsewhere, and for points in the air, the reading along the axis (`clearance`, `cos`
-    (K,); NaN clearances stay)."""
+    spike); elsewhere, and for points the axis reads in the air, the reading along the axis
+    (`clearance`, `cos` (K,); NaN clearances stay)."""
     inside = np.flatnonzero(clearance < 0)
     if not len(inside):
         return clearance, cos
@@ -336,12 +338,12 @@ def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, sc
     normal *= np.where(normal @ axis < 0, -1.0, 1.0)[:, None]  # out of the face, towards the mask
     offset = points[inside] - (centre if isinstance(scan, trimesh.PointCloud) else nearest)
     across = np.einsum("ij,ij->i", offset, normal)
-    depth = -across if isinstance(scan, trimesh.PointCloud) else np.linalg.norm(offset, axis=1)
+    height = across if isinstance(scan, trimesh.PointCloud) else np.copysign(np.linalg.norm(offset, axis=1), across)
     facing = normal @ axis
     stray = np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) > STRAY_MM
-    kept = (across < 0) & (facing >= COS_MIN) & ~stray
+    kept = (facing >= COS_MIN) & ~stray
     clearance, cos = clearance.copy(), cos.copy()
-    clearance[inside[kept]] = -depth[kept] / facing[kept]
+    clearance[inside[kept]] = height[kept] / facing[kept]
     cos[inside[kept]] = facing[kept]
     return clearance, cos
 
