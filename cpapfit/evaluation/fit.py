@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 from ..frozen import freeze_arrays
 from ..template import load_template
 from .leak import leak_l_min
-from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, press
+from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, cpap_load_n, press
 from .membrane import reach_mm
 from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
@@ -130,7 +130,7 @@ def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
 
     if opened(params.max_force_n):
         return None
-    return _bisected(opened, _cpap_force(rim, params), params.max_force_n, tol_n)[1]
+    return _bisected(opened, cpap_load_n(params.cpap_kpa, rim.sealed_area_mm2), params.max_force_n, tol_n)[1]
 
 
 def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, peak_kpa: float, tol_n: float = 0.01) -> float:
@@ -142,12 +142,7 @@ def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
 
     if not over(params.max_force_n):
         return params.max_force_n
-    return _bisected(lambda force: not over(force), _cpap_force(rim, params), params.max_force_n, tol_n)[0]
-
-
-def _cpap_force(rim: RimContact, params: FitParams) -> float:
-    """N: the CPAP pressure's push on the area the rim seals, the least force that holds the mask on."""
-    return params.cpap_kpa * rim.sealed_area_mm2 * N_PER_KPA_MM2
+    return _bisected(lambda force: not over(force), cpap_load_n(params.cpap_kpa, rim.sealed_area_mm2), params.max_force_n, tol_n)[0]
 
 
 def _bisected(below: Callable[[float], bool], lo: float, hi: float, tol_n: float) -> tuple[float, float]:
@@ -164,7 +159,7 @@ def recommended_force(rim: RimContact, k: np.ndarray, width_mm: float, params: F
     c = rim.covered
     cos = np.maximum(rim.cos[c], COS_MIN)
     contact = params.target_kpa * width_mm * rim.ds[c] @ cos
-    return float((contact + params.cpap_kpa * rim.sealed_area_mm2) * N_PER_KPA_MM2)
+    return float(contact * N_PER_KPA_MM2 + cpap_load_n(params.cpap_kpa, rim.sealed_area_mm2))
 
 
 @dataclass(frozen=True)

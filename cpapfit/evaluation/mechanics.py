@@ -39,12 +39,17 @@ class Pressed:
         freeze_arrays(self)
 
 
+def cpap_load_n(cpap_kpa: float, sealed_area_mm2: float) -> float:
+    """N: the CPAP pressure's push on the area a rim seals (mm^2), the least force that holds the mask on."""
+    return cpap_kpa * sealed_area_mm2 * N_PER_KPA_MM2
+
+
 def press(clearance, cos, area_mm2, k, uv, sealed_area_mm2: float, force_n: float, cpap_kpa: float) -> Pressed:
     """Equilibrium of a rim of K points (arrays (K,), uv (K, 2), all covered) under `force_n` N
     of headgear and `cpap_kpa` over `sealed_area_mm2`; k (K,) kPa/mm normal stiffness."""
     cos = np.maximum(cos, COS_MIN)
     spring = k * area_mm2 * cos**2 * N_PER_KPA_MM2  # N/mm along the axis
-    net = force_n - cpap_kpa * sealed_area_mm2 * N_PER_KPA_MM2
+    net = force_n - cpap_load_n(cpap_kpa, sealed_area_mm2)
     centre = (area_mm2 * cos) @ uv / (area_mm2 @ cos)  # the load's line of action: the contact band's centroid
     basis = np.column_stack([np.ones(len(clearance)), uv - centre])
     touch = float(clearance.min())
