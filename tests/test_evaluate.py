@@ -281,25 +281,44 @@ def test_a_rim_point_beside_a_ridge_is_pressed_by_its_distance_from_the_skin():
     assert -clearance * cos == pytest.approx(exact, abs=0.05)
 
 
-def test_a_rim_point_under_a_sheet_the_scan_sees_only_from_above_is_in_the_air():
-    """Skin: a flat floor, and 12 mm above part of it a sheet scanned only from above (the wing of
-    the nose, its underside hidden from the camera, over the groove beside it). Rim points 0.4-1.5 mm
-    over the floor under the sheet: along the axis the first surface up is the sheet, facing out, so
-    they read 10.5-11.6 mm inside the skin; the nearest skin is the floor below them, and they are in
-    the air by their height over it (a capture's peak of 9 kPa came from two such points)."""
+def test_a_rim_point_under_a_sheet_the_scan_sees_only_from_in_front_is_in_the_air():
+    """Skin: a flat floor, and 12 mm above part of it a sheet scanned only from in front (the wing
+    of the nose, its underside hidden from the camera, over the groove beside it); the floor has a
+    hole under the sheet (skin the camera cannot see). Rim points 0.4-1.5 mm over the floor's
+    plane under the sheet: along the axis the first surface up is the sheet, facing out, so they
+    read 10.5-11.6 mm inside the skin; the nearest skin is the floor below them, or the hole's edge
+    1 mm to the side, and they are in the air by their height over the floor's plane (not by their
+    distance to the hole's edge, 1.4-1.8 mm)."""
     from tests.test_cushion import grid_faces
 
     n = 61
     xy = np.stack(np.meshgrid(np.linspace(-15, 15, n), np.linspace(-15, 15, n)), -1).reshape(-1, 2)
     floor = trimesh.Trimesh(np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n), process=False)
+    centre = floor.triangles_center
+    hole = (np.abs(centre[:, 0] + 9.0) < 2.0) & (np.abs(centre[:, 1]) < 4.0)  # x -11..-7, y -4..4
+    floor = trimesh.Trimesh(floor.vertices, floor.faces[~hole], process=False)
+    floor.remove_unreferenced_vertices()
     sheet = trimesh.Trimesh(np.column_stack([0.5 * xy - [7.0, 0.0], np.full(len(xy), 12.0)]), grid_faces(n), process=False)
     skin = trimesh.util.concatenate([floor, sheet])
     points = np.array([[-5.0, 0.0, 0.4], [-8.0, 2.0, 1.0], [-10.0, -3.0, 1.5]])
     axis = np.array([0.0, 0.0, 1.0])
     clearance, under = _skin_below(points, skin, axis)
-    assert clearance == pytest.approx(points[:, 2] - 12.0, abs=1e-6)
+    assert clearance[0] == pytest.approx(0.4 - 12.0, abs=1e-6)
     clearance, cos = _nearest_skin(points, clearance, np.abs(_skin_planes(under, skin)[0] @ axis), skin, axis)
     assert clearance == pytest.approx(points[:, 2], abs=0.01) and cos == pytest.approx(1.0, abs=1e-6)
+
+
+def test_a_rim_point_past_the_middle_of_a_sheet_scanned_on_both_sides_stays_inside():
+    """Skin: a closed slab 4 mm thick (both of its sides in the scan, wound outwards). Rim points
+    3.0 and 3.4 mm under its top, 1.0 and 0.6 mm over its underside: the nearest skin is the
+    underside, facing away from the mask, so they are inside the slab, 3.0 and 3.4 mm deep along
+    the axis, not in the air over the underside."""
+    slab = trimesh.creation.box([30.0, 30.0, 4.0]).subdivide_to_size(1.0)
+    points = np.array([[0.0, 0.0, -1.0], [3.0, 2.0, -1.4]])
+    axis = np.array([0.0, 0.0, 1.0])
+    clearance, under = _skin_below(points, slab, axis)
+    clearance, _ = _nearest_skin(points, clearance, np.abs(_skin_planes(under, slab)[0] @ axis), slab, axis)
+    assert clearance == pytest.approx([-3.0, -3.4], abs=0.01)
 
 
 def test_a_rim_pressed_into_a_point_cloud_reads_its_depth_not_its_distance_to_a_sample():

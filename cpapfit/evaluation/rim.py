@@ -322,30 +322,59 @@ def _skin_planes(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -
 def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
                   axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(clearance (K,) mm, |cos| (K,)) of (K, 3) rim points, those the axis reads inside the skin
-    measured to the nearest skin: its distance (a point cloud's: to the plane of its points there)
-    over the |cos| of the scan's NORMAL_MM normal there, which is how fast that depth grows as the
-    mask moves along the axis. Where that skin puts the point on its mask side, the axis passed
-    through a sheet whose far side the scan lacks (the wing of the nose seen from above, over the
-    groove beside it): the point is in the air by as much. Kept where that skin faces the axis at
-    least COS_MIN and lies within STRAY_MM of the plane of the scan around it (else a torn edge's
-    spike); elsewhere, and for points the axis reads in the air, the reading along the axis
-    (`clearance`, `cos` (K,); NaN clearances stay)."""
+    measured to the nearest skin, where that skin faces the axis at least COS_MIN and lies within
+    STRAY_MM of the plane of the scan around it (else a torn edge's spike), over the |cos| of the
+    scan's NORMAL_MM normal there, which is how fast the reading changes as the mask moves along
+    the axis:
+    - under the plane of that skin: inside, by its distance to it (a point cloud's: its depth under
+      the plane of its points there);
+    - over that plane and, on a mesh, outside the triangle nearest it by the scan's own winding (the
+      side most of the skin under the rim faces, `_out_sign`): in the air by its height over the
+      plane. The axis went through a sheet whose far side the scan lacks (the wing of the nose seen
+      from in front, over the groove beside it). A point past the middle of a sheet whose far side
+      is in the scan stays inside, as does any such point over a point cloud (no winding to tell);
+    elsewhere, and for points the axis reads in the air, the reading along the axis (`clearance`,
+    `cos` (K,); NaN clearances stay)."""
     inside = np.flatnonzero(clearance < 0)
     if not len(inside):
         return clearance, cos
-    nearest, _ = _closest_points(points[inside], scan)
+    nearest, tri = _closest_points(points[inside], scan)
     normal, centre = _skin_planes(nearest, scan)
     normal *= np.where(normal @ axis < 0, -1.0, 1.0)[:, None]  # out of the face, towards the mask
     offset = points[inside] - (centre if isinstance(scan, trimesh.PointCloud) else nearest)
     across = np.einsum("ij,ij->i", offset, normal)
-    height = across if isinstance(scan, trimesh.PointCloud) else np.copysign(np.linalg.norm(offset, axis=1), across)
+    depth = -across if isinstance(scan, trimesh.PointCloud) else np.linalg.norm(offset, axis=1)
     facing = normal @ axis
-    stray = np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) > STRAY_MM
-    kept = (facing >= COS_MIN) & ~stray
+    trusted = (facing >= COS_MIN) & ~(np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) > STRAY_MM)
+    deep = trusted & (across < 0)
+    air = trusted & (across > 0) & _outside(offset, tri, scan, _out_sign(points, clearance, scan, axis))
     clearance, cos = clearance.copy(), cos.copy()
-    clearance[inside[kept]] = height[kept] / facing[kept]
-    cos[inside[kept]] = facing[kept]
+    clearance[inside[deep]] = -depth[deep] / facing[deep]
+    clearance[inside[air]] = across[air] / facing[air]
+    cos[inside[deep | air]] = facing[deep | air]
     return clearance, cos
+
+
+def _out_sign(points: np.ndarray, clearance: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray) -> float:
+    """+1 where a mesh's triangles face out of the skin, -1 where it is wound inside out: the side
+    the triangles under most of the (K, 3) rim points (along the axis, by their (K,) `clearance`
+    mm) face. +1 for a point cloud."""
+    hit = np.isfinite(clearance)
+    if isinstance(scan, trimesh.PointCloud) or not hit.any():
+        return 1.0
+    tri = _closest_points(points[hit] - clearance[hit, None] * axis, scan)[1]
+    facing = scan.face_normals[tri[tri >= 0]] @ axis
+    return 1.0 if not len(facing) or np.median(facing) >= 0 else -1.0
+
+
+def _outside(offset: np.ndarray, tri: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, out: float) -> np.ndarray:
+    """(K,) bool: the points `offset` (K, 3) mm from their nearest skin lie on the side its triangle
+    `tri` (K,) faces out (`out`: the scan's winding, `_out_sign`); False on a point cloud and where
+    there is no triangle (-1)."""
+    if isinstance(scan, trimesh.PointCloud):
+        return np.zeros(len(offset), dtype=bool)
+    normals = out * scan.face_normals[np.maximum(tri, 0)]
+    return (tri >= 0) & (np.einsum("ij,ij->i", offset, normals) > 0)
 
 
 def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
