@@ -22,7 +22,7 @@ from records import DATE_EPOCH, written
 from cpapfit.cli import main
 from cpapfit.io import load_scan
 from cpapfit.io.landmarks import user_landmarks
-from cpapfit.pipeline import assessed, place_template
+from cpapfit.pipeline import Placement, assessed, place_template
 from cpapfit.outputs import design_files, report_files
 from cpapfit.jobs import worker
 from cpapfit.work import at_once
@@ -130,10 +130,10 @@ class Judged:
     codes: list[str]
     messages: str
     quality: dict
-    placed: object
+    placed: Placement
 
 
-def gate_flags(tmp_path, ph, mask: str = "nasal", landmarks: Path | None = None) -> Judged:
+def judged_gates(tmp_path, ph, mask: str = "nasal", landmarks: Path | None = None) -> Judged:
     """Place the template on a subject's capture (`landmarks`: a user file) and judge the scan for
     `mask` as `design` does before the cushion is made (only the gates are read: the design after
     them does not change them); it must be flagged."""
@@ -155,7 +155,7 @@ def test_a_misstated_focal_length_is_flagged(tmp_path, phantom1, twice):
     make the face 1.3 times too narrow and short for its depth, and the mask as much too small; the
     shape fits as well as ever, so only the face's proportions tell: flagged, saying what to check."""
     clean = written(twice[0]["plain"][2] / "fit.json")["quality"]
-    judged = gate_flags(tmp_path, with_intrinsics(phantom1, 1.3))
+    judged = judged_gates(tmp_path, with_intrinsics(phantom1, 1.3))
     codes, err, q = judged.codes, judged.messages, judged.quality
     assert codes and set(codes) <= {"depth_ratio", "face_size"} and "intrinsics (fx, fy)" in err, err
     assert q["face_size"] / clean["face_size"] == pytest.approx(1 / 1.3, abs=0.03)
@@ -166,7 +166,7 @@ def test_a_misstated_depth_scale_is_flagged(tmp_path, phantom1):
     """A depth scale 1.35 times too large: the whole face, and the mask, 1.35 times too small
     (in proportion: the shape alone cannot tell), smaller than adults' faces are: flagged."""
     stated = dataclasses.replace(phantom1, sensor=dataclasses.replace(phantom1.sensor, depth_scale=phantom1.sensor.depth_scale * 1.35))
-    judged = gate_flags(tmp_path, stated)
+    judged = judged_gates(tmp_path, stated)
     codes, err, q = judged.codes, judged.messages, judged.quality
     assert codes == ["face_size"] and "check the capture's depth scale" in err, err
     p = phantom1.identity
@@ -174,14 +174,19 @@ def test_a_misstated_depth_scale_is_flagged(tmp_path, phantom1):
 
 
 def test_holes_under_the_seal_are_flagged(tmp_path, phantom1):
-    """A hole over a third of the seal curve (~45 mm, one stretch): flagged, not refused."""
+    """A hole over a third of the seal curve (~45 mm, one stretch): the whole command designs it
+    (neither the gates nor the rim's share over scanned skin refuse it), flagged, saying so."""
     curve = load_template().regions["nasal"].curve
-    judged = gate_flags(tmp_path, with_holes(phantom1, curve[: len(curve) // 3], 0.95, radius_px=(8.0, 10.0)), "nasal")
-    assert "hole_mm" in judged.codes, judged.messages
+    ph = with_holes(phantom1, curve[: len(curve) // 3], 0.95, radius_px=(8.0, 10.0))
+    write_files(tmp_path / "capture", capture_files(ph.image, ph.depth_raw, ph.intrinsics, ph.sensor.depth_scale))
+    code, err = run_design(tmp_path / "capture", "--stock", "none", "--mask", "nasal", "--out", tmp_path / "out")
+    fit = written(tmp_path / "out" / "fit.json")
+    assert code == 0 and fit["rescan_advised"] is True and "rescan advised" in err, err
+    assert "hole_mm" in [w["code"] for w in fit["warnings"]] and fit["custom"]["rim_covered_fraction"] < 1.0, err
 
 
 def test_a_noisy_scan_is_flagged(tmp_path):
-    judged = gate_flags(tmp_path, make_phantom(1, SensorModel(noise_mm_at_500=3.0)))
+    judged = judged_gates(tmp_path, make_phantom(1, SensorModel(noise_mm_at_500=3.0)))
     assert "residual_mm" in judged.codes, judged.messages
 
 
@@ -190,22 +195,24 @@ def test_landmarks_off_the_skin_are_flagged(tmp_path, phantom1):
     idx = np.arange(0, 468, 3)
     off = phantom1.landmarks[idx] - [0.0, 0.0, 1.5]  # towards the camera
     (tmp_path / "lm.json").write_text(json.dumps({"points": off.tolist(), "template_index": idx.tolist()}))
-    judged = gate_flags(tmp_path, phantom1, landmarks=tmp_path / "lm.json")
+    judged = judged_gates(tmp_path, phantom1, landmarks=tmp_path / "lm.json")
     assert judged.codes == ["landmarks_mm"], judged.messages
 
 
 def test_landmarks_off_along_the_skin_are_flagged_and_not_trusted(tmp_path, phantom1):
     """The true landmarks moved 4 mm (per axis) and put back on the skin (a careless file): on the
     skin, so the landmarks_mm gate passes them; far from their places on the face, so they are used
-    at the detected landmarks' weight and the design is flagged."""
+    at the detected landmarks' weight and the design (the whole command) is flagged."""
     idx = np.arange(0, 468, 3)
     truth = trimesh.Trimesh(phantom1.surface, phantom1.faces, process=False)
     moved = phantom1.landmarks[idx] + np.random.default_rng(0).normal(0.0, 4.0, (len(idx), 3))
     (tmp_path / "lm.json").write_text(json.dumps({"points": truth.nearest.on_surface(moved)[0].tolist(), "template_index": idx.tolist()}))
-    judged = gate_flags(tmp_path, phantom1, landmarks=tmp_path / "lm.json")
-    assert judged.codes == ["landmark_spread_mm"], judged.messages
-    assert judged.placed.registration.landmark_factor == pytest.approx(0.1)
-    assert judged.quality["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
+    write_files(tmp_path / "capture", capture_files(phantom1.image, phantom1.depth_raw, phantom1.intrinsics, phantom1.sensor.depth_scale))
+    code, err = run_design(tmp_path / "capture", "--landmarks", tmp_path / "lm.json", "--stock", "none", "--out", tmp_path / "out")
+    fit = written(tmp_path / "out" / "fit.json")
+    assert code == 0 and [w["code"] for w in fit["warnings"]] == ["landmark_spread_mm"] and "rescan advised" in err, err
+    assert fit["registration"]["landmark_weight_factor"] == pytest.approx(0.1)
+    assert fit["quality"]["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
 
 
 def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
@@ -214,7 +221,7 @@ def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
     the face the geometry gives (10.4 mm against 2.3 unshifted; 8.4 before the mirror term, which
     holds the face nearer the truth) flags it, saying why: past 7 mm as a spread, past 10 mm by
     dropping them for the face's shape alone (landmark-free)."""
-    judged = gate_flags(tmp_path, with_colour_shift(phantom1, 12))
+    judged = judged_gates(tmp_path, with_colour_shift(phantom1, 12))
     assert {"landmark_spread_mm", "landmark_free"} & set(judged.codes), judged.messages
     assert "colour image may not line up with the depth" in judged.messages, judged.messages
     assert judged.quality.get("landmark_spread_mm", np.inf) > GATES.detected_spread_flag_mm  # none recorded once they are dropped
