@@ -6,7 +6,8 @@ RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask ax
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
 pushed on. How far inside the skin it is: its distance to the nearest skin, over the |cos| of
-that skin's normal (`_nearest_skin`; along the axis, curved skin misjudges it). Evaluating the
+that skin's normal (`_nearest_skin`; along the axis, curved skin misjudges it); under a sheet the
+scan sees from one side only, its height over that skin. Evaluating the
 written mesh (not the design's internal curve) means `design` and `evaluate` measure the same
 thing. A membrane (`membrane.py`: the mesh thinner than MEMBRANE_MAX_MM) is not the rim: it is
 measured, per sector, for the seal it adds.
@@ -48,12 +49,13 @@ class RimContact:
 
     points: (K, 3) mm rim points on the cushion; skin: (K, 3) mm skin below each, along -axis;
     clearance: (K,) mm the rim travels along the axis to touch the skin (negative: rim inside the
-    skin, where its depth is its distance to the nearest skin over cos, `_nearest_skin`; NaN where
-    no skin was found along the axis, i.e. not covered); cos: (K,) |cos| of the angle between the
-    axis and the normal of the skin the clearance is measured to (the scan's, averaged over
-    NORMAL_MM; the registered template's where the scan has too little there); ds: (K,) mm of rim
-    length each point stands for; uv: (K, 2) mm in-plane position about the rim's centre (side,
-    up); sealed_area_mm2: area inside the rim, across the axis;
+    skin, where its depth is its distance to the nearest skin over cos, `_nearest_skin`, which also
+    reads points under a sheet seen from one side only as in the air; NaN where no skin was found
+    along the axis, i.e. not covered); cos: (K,) |cos| of the angle between the axis and the normal
+    of the skin the clearance is measured to (the scan's, averaged over NORMAL_MM; the registered
+    template's where the scan has too little there); ds: (K,) mm of rim length each point stands
+    for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area
+    inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
 
