@@ -347,9 +347,10 @@ def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, sc
     across = np.einsum("ij,ij->i", offset, normal)
     depth = -across if isinstance(scan, trimesh.PointCloud) else np.linalg.norm(offset, axis=1)
     facing = normal @ axis
-    trusted = (facing >= COS_MIN) & ~(np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) > STRAY_MM)
-    deep = trusted & (across < 0)
-    air = trusted & (across > 0) & _outside(offset, tri, scan, _out_sign(points, clearance, scan, axis))
+    trusted = (facing >= COS_MIN) & (np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) <= STRAY_MM)
+    deep, air = trusted & (across < 0), trusted & (across > 0)
+    if air.any():  # the scan's winding is read only where a point may be in the air
+        air &= _outside(offset, tri, scan, _out_sign(points, clearance, scan, axis))
     clearance, cos = clearance.copy(), cos.copy()
     clearance[inside[deep]] = -depth[deep] / facing[deep]
     clearance[inside[air]] = across[air] / facing[air]
