@@ -29,6 +29,7 @@ from .quality.proportions import proportions
 from .quality.gates import Quality, assess, require_quality
 from .thresholds import QualityParams
 from .similarity import Similarity
+from .solids import self_intersecting_edges
 from .landmarks.noise import LandmarkNoise
 from .landmarks.types import Landmarks
 from .scan import Scan, scan_surface
@@ -207,7 +208,7 @@ def design(
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
     asleep = state_faces(face, sleep_states(mask))
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake, asleep)
-    checks = _checked(solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
+    checks = _checked(cushion, solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould, frame")
     moulded = mould(cushion, solid)
     frame = build_frame(cushion, solid)
@@ -252,21 +253,25 @@ def assessed(scan: Scan, mask: str, placement: Placement, params: CushionParams 
     return Assessed(face, contact, neutral, rim, gates)
 
 
-def _checked(solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str, landmarks_path: str) -> dict:
+def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str,
+             landmarks_path: str) -> dict:
     """`check_solid` of a custom cushion (`wall`, `membrane`: thinnest measured and set thickness,
-    mm); a cushion crossing itself comes from a seal curve that crosses itself, which a well-placed
-    template does not carry: the refusal says what to do."""
+    mm). A cushion crossing itself is refused with its cause: its own surface crossing itself (a
+    twisted seal curve, which a well-placed template does not carry: the refusal says what to do),
+    or, that surface clean, its solid folding where the surface bends tighter than it is thick."""
     try:
         return check_solid(solid, *wall, name, membrane)
     except SolidError as exc:
         crossings = exc.found.get("self_intersecting_edges", 0)
         if not crossings:
             raise
-        raise SolidError(
-            f"{name} would cross itself ({crossings} self-intersecting edges): the seal curve carried onto this scan is "
-            f"twisted, which a well-placed template does not give (landmarks by {landmarks_path}); give landmarks with "
-            "--landmarks, or rescan facing the camera; nothing was written"
-        ) from None
+        if self_intersecting_edges(cushion_sheet(cushion)):
+            cause = (f"the seal curve carried onto this scan is twisted, which a well-placed template does not give "
+                     f"(landmarks by {landmarks_path}); give landmarks with --landmarks, or rescan facing the camera")
+        else:
+            cause = (f"its surface does not, but its {wall[1]:g} mm wall or {membrane[1]:g} mm membrane folds where the "
+                     "surface bends tighter than that, a shape of this face the cushion cannot follow")
+        raise SolidError(f"{name} would cross itself ({crossings} self-intersecting edges): {cause}; nothing was written") from None
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:

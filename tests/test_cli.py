@@ -10,6 +10,7 @@ import pytest
 import trimesh
 from PIL import Image
 
+from cpapfit.cushion.generic import template_cushion
 from cpapfit.fabrication.files import SolidError
 
 
@@ -221,7 +222,8 @@ def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
 def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, placed1, monkeypatch):
     """A seal curve that crosses itself (two opposite stretches swapped, as a misplaced template
     can carry) puts the cushion's rim off the skin: refused by the rim gate before any solid is
-    built, saying what to do, nothing written. A cushion that still crosses itself is refused too."""
+    built, saying what to do, nothing written. A cushion that still crosses itself is refused too, by
+    its cause: its surface twisted (what to do), or, its surface clean, its solid folded."""
     import dataclasses
 
     import cpapfit.pipeline as pipeline
@@ -240,5 +242,10 @@ def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, 
     assert not out.exists() or not any(out.iterdir())
     a = trimesh.creation.box((10, 10, 10))
     crossing = trimesh.util.concatenate([a, a.copy().apply_translation((3, 4, 2.5))])  # two boxes through each other
-    with pytest.raises(SolidError, match="would cross itself .* give landmarks with --landmarks"):
-        pipeline._checked(crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")
+    clean = template_cushion("nasal")
+    n = len(clean.control)
+    swapped = dataclasses.replace(clean, control=clean.control[np.r_[n // 2: n // 2 + n // 8, n // 8: n // 2, 0: n // 8, n // 2 + n // 8: n]])
+    with pytest.raises(SolidError, match="would cross itself .* twisted, .* give landmarks with --landmarks, or rescan facing the camera; nothing was written$"):
+        pipeline._checked(swapped, crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")
+    with pytest.raises(SolidError, match="would cross itself .* its surface does not, but its 2 mm wall or 0.5 mm membrane folds"):
+        pipeline._checked(clean, crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")
