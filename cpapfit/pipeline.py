@@ -37,6 +37,7 @@ from .stock_fit import StockComparison, fitting_stock, stock_solids
 from .template import load_template, mask_region
 from .work import ahead, at_once
 
+SURFACE_REACH_MM = 30.0  # the scan kept for pressing cushions: this near the seal bands, for any size, pushed or rolled
 
 
 @dataclass(frozen=True)
@@ -275,9 +276,11 @@ def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float]
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
-    """The face cushions are pressed onto: the scan, its registered template, the mask axis (the
-    template's +z carried by the similarity) and the head's up direction (its +y)."""
-    return face_of(scan_surface(scan), reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
+    """The face cushions are pressed onto: the scan within SURFACE_REACH_MM of the registered
+    template's seal bands (both masks), its registered template, the mask axis (the template's +z
+    carried by the similarity) and the head's up direction (its +y)."""
+    surface = scan_surface(scan, reg.vertices[mask_region(load_template())], SURFACE_REACH_MM)
+    return face_of(surface, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 
 def pressed_asleep(

@@ -5,6 +5,7 @@ from functools import cached_property
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from .frozen import freeze_arrays
 from .rims import boundary_vertices, cloud_boundary, grid_boundary
@@ -101,7 +102,16 @@ class Scan:
         return out
 
 
-def scan_surface(scan: Scan) -> trimesh.Trimesh | trimesh.PointCloud:
-    """The scan as trimesh sees it (its triangles, or its points for a point cloud). A design builds
-    it once and hands it to every stage, so that its r-tree and Embree scene are built once."""
-    return trimesh.PointCloud(scan.vertices) if scan.is_point_cloud else trimesh.Trimesh(scan.vertices, scan.faces, process=False)
+def scan_surface(scan: Scan, near: np.ndarray | None = None, reach_mm: float = np.inf) -> trimesh.Trimesh | trimesh.PointCloud:
+    """The scan as trimesh sees it (its triangles, or its points for a point cloud); given (K, 3) mm
+    points `near`, only its part within `reach_mm` of one of them (a mesh's triangles with a corner
+    that near, its vertices renumbered in their order). A design builds it once and hands it to every
+    stage, so that its r-tree and Embree scene are built once, over no more of the head than it needs."""
+    vertices, faces = scan.vertices, scan.faces
+    keep = np.ones(len(vertices), dtype=bool) if near is None else np.isfinite(
+        cKDTree(near).query(vertices, distance_upper_bound=reach_mm)[0])
+    if scan.is_point_cloud:
+        return trimesh.PointCloud(vertices[keep])
+    faces = faces[keep[faces].any(axis=1)]
+    used, inverse = np.unique(faces, return_inverse=True)
+    return trimesh.Trimesh(vertices[used], inverse.reshape(-1, 3), process=False)

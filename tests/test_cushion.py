@@ -200,6 +200,26 @@ def test_seal_points_over_a_hole_are_not_dragged_to_its_rim(cloud):
     assert np.allclose(moved[:3], points[:3]) and np.allclose(moved[3:], points[3:] - [0, 0, 0.5], atol=1e-9)
 
 
+@pytest.mark.parametrize("cloud", [False, True])
+def test_the_surface_pressed_on_is_the_scan_near_the_seal(cloud):
+    """A 41 x 41 mm grid (1 mm) kept within 5.5 mm of two points: a mesh keeps exactly its triangles
+    with a corner that near, the same triangles in space (vertices renumbered, none unused); a cloud
+    its points that near."""
+    n = 41
+    xy = np.stack(np.meshgrid(np.arange(n) - 20.0, np.arange(n) - 20.0), -1).reshape(-1, 2)
+    vertices, faces = np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n)
+    scan = Scan(vertices, np.zeros((0, 3), dtype=np.int64) if cloud else faces, np.tile([0.0, 0.0, 1.0], (len(xy), 1)))
+    near = np.array([[0.0, 0.0, 1.0], [12.0, 12.0, 0.0]])
+    close = np.linalg.norm(vertices[:, None] - near[None], axis=2).min(axis=1) <= 5.5
+    kept = scan_surface(scan, near, 5.5)
+    if cloud:
+        assert sorted(map(tuple, kept.vertices)) == sorted(map(tuple, vertices[close]))
+        return
+    expected = {tuple(sorted(map(tuple, t))) for t in vertices[faces[close[faces].any(axis=1)]]}
+    assert {tuple(sorted(map(tuple, t))) for t in kept.triangles} == expected
+    assert len(kept.faces) == len(expected) and len(np.unique(kept.faces)) == len(kept.vertices)
+
+
 def seal_on_sphere(seed: int, step: float, sigma: float, depth_step: float | None, ring: tuple[float, float]):
     """Seal points 0.5 mm above a sphere of radius 80 mm seen as a 41 × 41 depth grid (`step` mm)
     with σ `sigma` mm noise, quantised in `depth_step` mm if given, moved onto the scan along normals
