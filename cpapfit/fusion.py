@@ -53,7 +53,7 @@ class FusionParams:
     ball integrated, round the point the tracked cameras look at; max_integrated: the tracked
     frames integrated at most (evenly spread)."""
 
-    voxel_mm: float = 1.2
+    voxel_mm: float = 0.8
     truncation_mm: float = 4.0
     subject_mm: float = 300.0
     icp_voxel_mm: float = 3.0
