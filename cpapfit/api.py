@@ -110,7 +110,7 @@ def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False
         raise InputError("generic, stock and states need the mask (nasal or oronasal): which cushion to compare with, which states to press")
     placed = place_template(scan, user_landmarks(landmarks, scan), params=params.registration, quality=params.quality,
                             landmark_noise=params.landmark_noise)
-    face = face_for(scan, placed.alignment, placed.registration)
+    face = face_for(scan, placed.alignment, placed.registration, cushion.vertices)
     cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
     if states:
         fits, pressed = pressed_asleep(face, cushions, mask, params.cushion, params.fit, force_n)

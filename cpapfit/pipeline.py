@@ -275,11 +275,12 @@ def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float]
         raise SolidError(f"{name} would cross itself ({crossings} self-intersecting edges): {cause}; nothing was written") from None
 
 
-def face_for(scan: Scan, al: Alignment, reg: Registration) -> Face:
+def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray | None = None) -> Face:
     """The face cushions are pressed onto: the scan within SURFACE_REACH_MM of the registered
-    template's seal bands (both masks), its registered template, the mask axis (the template's +z
-    carried by the similarity) and the head's up direction (its +y)."""
-    surface = scan_surface(scan, reg.vertices[mask_region(load_template())], SURFACE_REACH_MM)
+    template's seal bands (both masks) or of a given `cushion`'s (V, 3) mm vertices, its registered
+    template, the mask axis (the template's +z carried by the similarity) and the head's up direction (its +y)."""
+    near = reg.vertices[mask_region(load_template())]
+    surface = scan_surface(scan, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM)
     return face_of(surface, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 
