@@ -14,7 +14,7 @@ from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
 from .cushion.contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
-from .cushion.solid import cushion_sheet
+from .cushion.solid import cushion_sheet, membrane_sheet
 from .cushion.generic import NOSE_TIP, place, template_cushion
 from .cushion.compensation import Preload, compensated_cushion
 from .cushion.envelope import enveloped_cushion, headgear_force
@@ -257,9 +257,10 @@ def assessed(scan: Scan, mask: str, placement: Placement, params: CushionParams 
 def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str,
              landmarks_path: str) -> dict:
     """`check_solid` of a custom cushion (`wall`, `membrane`: thinnest measured and set thickness,
-    mm). A cushion crossing itself is refused with its cause: its own surface crossing itself (a
+    mm). A cushion crossing itself is refused with its cause: its wall's surface crossing itself (a
     twisted seal curve, which a well-placed template does not carry: the refusal says what to do),
-    or, that surface clean, its solid folding where the surface bends tighter than it is thick."""
+    its membrane's surface crossing itself, or, both clean, its solid folding where a surface bends
+    tighter than it is thick."""
     try:
         return check_solid(solid, *wall, name, membrane)
     except SolidError as exc:
@@ -269,6 +270,8 @@ def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float]
         if self_intersecting_edges(cushion_sheet(cushion)):
             cause = (f"the seal curve carried onto this scan is twisted, which a well-placed template does not give "
                      f"(landmarks by {landmarks_path}); give landmarks with --landmarks, or rescan facing the camera")
+        elif cushion.membrane is not None and self_intersecting_edges(membrane_sheet(cushion)):
+            cause = "its membrane's flaps run into each other where the seal bends tightly inwards, a shape of this face it cannot follow"
         else:
             cause = (f"its surface does not, but its {wall[1]:g} mm wall or {membrane[1]:g} mm membrane folds where the "
                      "surface bends tighter than that, a shape of this face the cushion cannot follow")

@@ -104,14 +104,23 @@ class Scan:
 
 def scan_surface(scan: Scan, near: np.ndarray | None = None, reach_mm: float = np.inf) -> trimesh.Trimesh | trimesh.PointCloud:
     """The scan as trimesh sees it (its triangles, or its points for a point cloud); given (K, 3) mm
-    points `near`, only its part within `reach_mm` of one of them (a mesh's triangles with a corner
-    that near, its vertices renumbered in their order). A design builds it once and hands it to every
-    stage, so that its r-tree and Embree scene are built once, over no more of the head than it needs."""
+    points `near`, only its part within `reach_mm` of one of them: a cloud's points, a mesh's
+    triangles with a point that near (a corner within the reach and the triangle's longest edge)
+    and its points that near with no triangle, in their order; the whole scan where nothing is that
+    near. A design builds it once and hands it to every stage, so that its r-tree and Embree scene
+    are built once, over no more of the head than it needs."""
     vertices, faces = scan.vertices, scan.faces
-    keep = np.ones(len(vertices), dtype=bool) if near is None else np.isfinite(
-        cKDTree(near).query(vertices, distance_upper_bound=reach_mm)[0])
+    keep, kept = np.ones(len(vertices), dtype=bool), faces
+    if near is not None:
+        corners = vertices[faces]
+        longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1) if len(faces) else np.zeros(0)
+        distance = cKDTree(near).query(vertices, distance_upper_bound=reach_mm + longest.max(initial=0.0))[0]
+        kept = faces[(distance[faces].min(axis=1) <= reach_mm + longest)]
+        keep = distance <= reach_mm
+        keep[kept.ravel()] = True
+        if not keep.any():
+            keep, kept = np.ones(len(vertices), dtype=bool), faces
     if scan.is_point_cloud:
         return trimesh.PointCloud(vertices[keep])
-    faces = faces[keep[faces].any(axis=1)]
-    used, inverse = np.unique(faces, return_inverse=True)
-    return trimesh.Trimesh(vertices[used], inverse.reshape(-1, 3), process=False)
+    index = np.cumsum(keep) - 1
+    return trimesh.Trimesh(vertices[keep], index[kept], process=False)

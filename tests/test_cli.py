@@ -11,6 +11,7 @@ import trimesh
 from PIL import Image
 
 from cpapfit.cushion.generic import template_cushion
+from cpapfit.cushion.nurbs import MEMBRANE_ROWS
 from cpapfit.fabrication.files import SolidError
 
 
@@ -223,7 +224,7 @@ def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, 
     """A seal curve that crosses itself (two opposite stretches swapped, as a misplaced template
     can carry) puts the cushion's rim off the skin: refused by the rim gate before any solid is
     built, saying what to do, nothing written. A cushion that still crosses itself is refused too, by
-    its cause: its surface twisted (what to do), or, its surface clean, its solid folded."""
+    its cause: its wall's surface twisted (what to do), its membrane's, or, both clean, its solid folded."""
     import dataclasses
 
     import cpapfit.pipeline as pipeline
@@ -249,3 +250,6 @@ def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, 
         pipeline._checked(swapped, crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")
     with pytest.raises(SolidError, match="would cross itself .* its surface does not, but its 2 mm wall or 0.5 mm membrane folds"):
         pipeline._checked(clean, crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")
+    flaps = dataclasses.replace(clean, membrane=swapped.control[:, :MEMBRANE_ROWS])  # the wall clean, its membrane twisted
+    with pytest.raises(SolidError, match="would cross itself .* its membrane's flaps run into each other"):
+        pipeline._checked(flaps, crossing, (5.0, 2.0), (5.0, 0.5), "the nasal cushion", "render")

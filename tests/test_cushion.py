@@ -202,22 +202,26 @@ def test_seal_points_over_a_hole_are_not_dragged_to_its_rim(cloud):
 
 @pytest.mark.parametrize("cloud", [False, True])
 def test_the_surface_pressed_on_is_the_scan_near_the_seal(cloud):
-    """A 41 x 41 mm grid (1 mm) kept within 5.5 mm of two points: a mesh keeps exactly its triangles
-    with a corner that near, the same triangles in space (vertices renumbered, none unused); a cloud
-    its points that near."""
+    """A 41 x 41 mm grid (1 mm) and two stray points with no triangle, kept within 5.5 mm of two
+    points: a mesh keeps exactly its triangles with a point that near (a corner within 5.5 mm and
+    the triangle's longest edge), the same triangles in space, and the stray point that near; a cloud
+    its points that near. Nothing that near: the whole scan."""
     n = 41
     xy = np.stack(np.meshgrid(np.arange(n) - 20.0, np.arange(n) - 20.0), -1).reshape(-1, 2)
-    vertices, faces = np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n)
-    scan = Scan(vertices, np.zeros((0, 3), dtype=np.int64) if cloud else faces, np.tile([0.0, 0.0, 1.0], (len(xy), 1)))
+    vertices = np.vstack([np.column_stack([xy, np.zeros(len(xy))]), [[2.0, 2.5, 3.0], [15.0, -15.0, 3.0]]])
+    faces = grid_faces(n)
+    scan = Scan(vertices, np.zeros((0, 3), dtype=np.int64) if cloud else faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
     near = np.array([[0.0, 0.0, 1.0], [12.0, 12.0, 0.0]])
-    close = np.linalg.norm(vertices[:, None] - near[None], axis=2).min(axis=1) <= 5.5
+    distance = np.linalg.norm(vertices[:, None] - near[None], axis=2).min(axis=1)
     kept = scan_surface(scan, near, 5.5)
+    assert len(scan_surface(scan, near + 1000.0, 5.5).vertices) == len(vertices)
     if cloud:
-        assert sorted(map(tuple, kept.vertices)) == sorted(map(tuple, vertices[close]))
+        assert sorted(map(tuple, kept.vertices)) == sorted(map(tuple, vertices[distance <= 5.5]))
         return
-    expected = {tuple(sorted(map(tuple, t))) for t in vertices[faces[close[faces].any(axis=1)]]}
-    assert {tuple(sorted(map(tuple, t))) for t in kept.triangles} == expected
-    assert len(kept.faces) == len(expected) and len(np.unique(kept.faces)) == len(kept.vertices)
+    longest = np.linalg.norm(vertices[faces] - np.roll(vertices[faces], 1, axis=1), axis=2).max(axis=1)
+    expected = {tuple(sorted(map(tuple, t))) for t in vertices[faces[distance[faces].min(axis=1) <= 5.5 + longest]]}
+    assert {tuple(sorted(map(tuple, t))) for t in kept.triangles} == expected and len(kept.faces) == len(expected)
+    assert len(kept.vertices) == len(np.unique(kept.faces)) + 1 and (2.0, 2.5, 3.0) in map(tuple, kept.vertices)
 
 
 def seal_on_sphere(seed: int, step: float, sigma: float, depth_step: float | None, ring: tuple[float, float]):

@@ -63,6 +63,11 @@ def cushion_sheet(cushion: Cushion, n_u: int = 128, n_v: int = 24) -> trimesh.Tr
     return trimesh.Trimesh(cushion.grid(n_u, n_v).reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
 
 
+def membrane_sheet(cushion: Cushion, n_u: int = 128, n_v: int = 8) -> trimesh.Trimesh:
+    """The membrane's face-side surface (no thickness) as a mesh; the cushion must have a membrane."""
+    return trimesh.Trimesh(cushion.membrane_grid(n_u, n_v).reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
+
+
 def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 24) -> tuple[trimesh.Trimesh, float, int]:
     """(the printable wall, its thinnest wall in mm, its self-intersecting edges: 0 unless every
     smoothing folds): the NURBS surface sampled and `thickened` away from the face to the set wall."""
