@@ -30,7 +30,9 @@ def run(*args: str) -> tuple[float, float]:
     """(wall seconds, CPU seconds of the run's processes) of `cpapfit ARGS`."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "cpapfit", *args], check=True, capture_output=True)
+    done = subprocess.run([sys.executable, "-m", "cpapfit", *args], capture_output=True, text=True)
+    if done.returncode:
+        sys.exit(f"cpapfit {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()}")
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
