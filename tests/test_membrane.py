@@ -4,9 +4,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import trimesh
 
 from cpapfit.evaluation.fit import FitParams, fit_rim
-from cpapfit.evaluation.membrane import BAND_MM, bending_stiffness, reach_mm, width_for
+from cpapfit.evaluation.membrane import BAND_MM, MEMBRANE_MAX_MM, bending_stiffness, reach_mm, width_for
+from cpapfit.evaluation.rim import REFINE_MM, refined
 from cpapfit.evaluation.states import FaceState, fit_states
 from cpapfit.pipeline import evaluated_cushions, face_for
 
@@ -29,6 +31,18 @@ def test_a_flap_reaches_as_far_as_the_pressure_lays_it_on_the_skin():
     widths = width_for(need, 0.5, P4)
     assert reach_mm(widths, np.full(4, 0.5), P4) == pytest.approx(need, abs=1e-9)  # the narrowest flap that reaches
     assert reach_mm(widths - 0.05, np.full(4, 0.5), P4).max() < need.max()
+
+
+@pytest.mark.parametrize("thick", [0.5, 2.2])
+def test_a_sheet_is_as_thick_everywhere_once_refined_its_free_edge_too(thick):
+    """A closed slab `thick` mm thick, 20 x 10 mm, in 12 long triangles, refined to 1 mm edges: every
+    vertex reads the slab's thickness within 0.01 mm, the ones made on its end faces too (whose own
+    rays run 10-20 mm along the slab); a 0.5 mm one is all membrane, a 2.2 mm one all wall. A flap's
+    free edge read as wall made its tip the rim wherever it touched the side of the nose."""
+    fine, thickness = refined(trimesh.creation.box((thick, 20.0, 10.0)))
+    assert len(fine.vertices) > 200 and fine.edges_unique_length.max() <= REFINE_MM
+    assert thickness == pytest.approx(np.full(len(thickness), thick), abs=0.01)
+    assert (thickness <= MEMBRANE_MAX_MM).all() == (thick < MEMBRANE_MAX_MM)
 
 
 def test_the_designed_membrane_is_found_on_the_cushion_as_wide_and_thick_as_designed(designed):

@@ -197,15 +197,19 @@ def _rim_band(height: np.ndarray, sector: np.ndarray, sectors: int) -> np.ndarra
 
 def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
     """(the cushion mesh with no edge longer than REFINE_MM (a refined mesh is its own refinement),
-    its (V,) thickness mm: a closed cushion's own faces' `face_thickness_mm`, carried to the faces
-    refined from them; inf on an open sheet)."""
+    its (V,) thickness mm: at a closed cushion's own vertices `vertex_thickness_mm` of its faces'
+    `face_thickness_mm`; at a vertex made by refining, the least over the faces it lies on of the
+    most of their source face's corners. A face across a sheet's end (a flap's free edge, whose
+    own ray runs along the flap) is as thin as its corners, which lie on the flap's two sides;
+    inf on an open sheet)."""
     face = face_thickness_mm(cushion) if cushion.is_watertight else np.full(len(cushion.faces), np.inf)
-    corners = cushion.vertices[cushion.faces]
-    if np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max() <= REFINE_MM:
-        return cushion, vertex_thickness_mm(cushion, face)
+    corner = vertex_thickness_mm(cushion, face)
+    edges = cushion.vertices[cushion.faces]
+    if np.linalg.norm(edges - np.roll(edges, 1, axis=1), axis=2).max() <= REFINE_MM:
+        return cushion, corner
     vertices, faces, source = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM, return_index=True)
     fine = trimesh.Trimesh(vertices, faces, process=False)
-    return fine, vertex_thickness_mm(fine, face[source])
+    return fine, vertex_thickness_mm(fine, corner[cushion.faces].max(axis=1)[source])
 
 
 def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:
