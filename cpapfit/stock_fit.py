@@ -8,7 +8,8 @@ the axis on a 3 x 3 grid SEAT_STEPS_MM[0] apart and again SEAT_STEPS_MM[1] apart
 (17 seats; a compass walk from the bridge tries fewer but settles on worse seats, `bench/RESULTS.md`).
 A seat that seals at no more than COMFORT_N is better than one that does not; among those that seal, the lower peak pressure
 at the force that seals them is better; among those that do not, the lower leak at COMFORT_N.
-The best size is the best seat of every size so judged.
+The best size is the best seat of every size so judged. A seat from which the cushion's wall does not
+run all the way round the mask axis over the face is no seat; a size with none is not fitted there.
 """
 
 from dataclasses import dataclass, replace
@@ -20,6 +21,7 @@ import trimesh
 
 from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
+from .errors import InputError
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
 from .evaluation.states import StateFit, fit_states, merged, sleep_states
@@ -116,7 +118,10 @@ class StockFitting:
         mask, face, params, fit_params = self.mask, self.face, self.params, self.fit_params
         done = {size: seated(mask, size, face, params, fit_params) if job.cancel() else job.result()
                 for size, job in reversed(self.seats)}  # from the end: the sizes the worker is least likely to have started
-        sizes = tuple(sorted((done[size] for size, _ in self.seats), key=StockFit.rank))
+        sizes = tuple(sorted((done[size] for size, _ in self.seats if done[size] is not None), key=StockFit.rank))
+        if not sizes:
+            raise InputError(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) sits all the way "
+                             "round the mask axis on this face at any seat")
         compared = StockComparison(sizes, self.gauge, ())
         gauge_fit = compared.gauge_fit
         if not asleep:
@@ -157,23 +162,29 @@ def gauge_size(mask: str, registered: np.ndarray) -> str:
     return min(("S", "M", "L"), key=lambda s: abs(measure - mean * size_scale(mask, s)[0]))
 
 
-def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(), fit_params: FitParams = FitParams()) -> StockFit:
-    """The stock `size` at its best seat on `face` (module docstring)."""
+def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(),
+           fit_params: FitParams = FitParams()) -> StockFit | None:
+    """The stock `size` at its best seat on `face` (module docstring); None where at no seat tried
+    its wall runs all the way round the mask axis over the face (a size too large for it)."""
     mesh, thickness = _refined_stock(mask, size, params)
     zone = rim_zone(_placed(mesh, face, np.zeros(2)), face.axis, face.up, thickness)  # every seat's, moved across the axis
     tried = {}
 
-    def at(offset: np.ndarray) -> StockFit:
+    def at(offset: np.ndarray) -> StockFit | None:
         key = tuple(np.round(offset, 6))
         if key not in tried:
-            tried[key] = _pressed(size, zone, face, offset, params, fit_params)
+            try:
+                tried[key] = _pressed(size, zone, face, offset, params, fit_params)
+            except InputError:  # not all the way round the face from here: no seat
+                tried[key] = None
         return tried[key]
 
     best, centre = None, np.zeros(2)
     for step in SEAT_STEPS_MM:
-        for offset in centre + step * GRID:
-            trial = at(offset)
+        for trial in filter(None, (at(offset) for offset in centre + step * GRID)):
             best = trial if best is None or trial.rank() < best.rank() else best
+        if best is None:
+            return None
         centre = np.asarray(best.offset_mm)
     return best
 

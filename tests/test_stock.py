@@ -7,7 +7,8 @@ import trimesh
 from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, size_scale, stock_cushion
 from cpapfit.evaluation.fit import Face
 from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm
-from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, gauge_size, seated
+from cpapfit.errors import InputError
+from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, compared_stock, gauge_size, seated
 from cpapfit.template import load_template
 
 
@@ -55,6 +56,16 @@ def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
     assert np.abs(fit.offset_mm).max() <= 1.0
     assert summary["leak_l_min"] == 0.0 and summary["pressure_max_kpa"] < 4.3
     assert summary["rim_covered_fraction"] == 1.0
+
+
+def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():
+    """The L oronasal cushion on the mean face shrunk to 0.7: from no seat does its wall run all the
+    way round the face, so it is not fitted (None); asked for alone, the comparison refuses in one
+    line naming it."""
+    face = face_scaled(np.full(3, 0.7))
+    assert seated("oronasal", "L", face) is None
+    with pytest.raises(InputError, match=r"no oronasal stock size tried \(L\) sits all the way round"):
+        compared_stock("oronasal", face, "L", asleep=False)
 
 
 def test_a_design_sets_every_stock_size_beside_it_best_first(designed):
