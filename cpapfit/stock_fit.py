@@ -9,7 +9,7 @@ the axis on a 3 x 3 grid SEAT_STEPS_MM[0] apart and again SEAT_STEPS_MM[1] apart
 A seat that seals at no more than COMFORT_N is better than one that does not; among those that seal, the lower peak pressure
 at the force that seals them is better; among those that do not, the lower leak at COMFORT_N.
 The best size is the best seat of every size so judged. A seat from which the cushion's wall does not
-run all the way round the mask axis over the face is no seat; a size with none is not fitted there.
+run all the way round the mask axis over the scanned face is no seat; a size with none is not fitted there.
 """
 
 from dataclasses import dataclass, replace
@@ -121,7 +121,7 @@ class StockFitting:
         sizes = tuple(sorted((done[size] for size, _ in self.seats if done[size] is not None), key=StockFit.rank))
         if not sizes:
             raise InputError(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) sits all the way "
-                             "round the mask axis on this face at any seat")
+                             "round the mask axis over this scanned face at any seat")
         compared = StockComparison(sizes, self.gauge, ())
         gauge_fit = compared.gauge_fit
         if not asleep:
@@ -165,7 +165,8 @@ def gauge_size(mask: str, registered: np.ndarray) -> str:
 def seated(mask: str, size: str, face: Face, params: CushionParams = CushionParams(),
            fit_params: FitParams = FitParams()) -> StockFit | None:
     """The stock `size` at its best seat on `face` (module docstring); None where at no seat tried
-    its wall runs all the way round the mask axis over the face (a size too large for it)."""
+    is its rim found (`rim_in`: its wall does not run all the way round the mask axis over the face,
+    as a size too large for it, or lies over too little scanned skin)."""
     mesh, thickness = _refined_stock(mask, size, params)
     zone = rim_zone(_placed(mesh, face, np.zeros(2)), face.axis, face.up, thickness)  # every seat's, moved across the axis
     tried = {}
@@ -175,7 +176,7 @@ def seated(mask: str, size: str, face: Face, params: CushionParams = CushionPara
         if key not in tried:
             try:
                 tried[key] = _pressed(size, zone, face, offset, params, fit_params)
-            except InputError:  # not all the way round the face from here: no seat
+            except InputError:  # no rim over the face from here: no seat
                 tried[key] = None
         return tried[key]
 
