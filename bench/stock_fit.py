@@ -46,7 +46,11 @@ def run(job: tuple[str, str, Path | None]) -> list[dict]:
     rows = []
     for mask in MASKS:
         t0 = time.perf_counter()
-        compared = compared_stock(mask, face, asleep=False)
+        try:
+            compared = compared_stock(mask, face, asleep=False)
+        except CpapfitError as exc:
+            rows.append({"face": name, "mask": mask, "outcome": "refused", "reason": str(exc)[:200]})
+            continue
         fits = {f.size: f for f in compared.sizes}
         sizes = {size: {"offset_mm": list(f.offset_mm), "sealed": f.sealed, "force_n": f.fit.force_n,
                         **{k: f.fit.summary()[k] for k in ("leak_l_min", "pressure_max_kpa", "pressure_max_region",
@@ -57,9 +61,12 @@ def run(job: tuple[str, str, Path | None]) -> list[dict]:
     return rows
 
 
+NOT_SEATED = {"leak_l_min": float("nan"), "pressure_max_kpa": float("nan")}  # a size with no seat on the face
+
+
 def seals(row: dict, size: str) -> bool:
-    """The size seals awake: at most SEAL_L_MIN and the peak at most CAPILLARY_KPA."""
-    s = row["sizes"][size]
+    """The size seals awake: at most SEAL_L_MIN and the peak at most CAPILLARY_KPA (not where it had no seat)."""
+    s = row["sizes"].get(size, NOT_SEATED)
     return s["leak_l_min"] <= SEAL_L_MIN and s["pressure_max_kpa"] <= CAPILLARY_KPA
 
 
@@ -71,7 +78,7 @@ def table(rows: list[dict]) -> str:
         if r["outcome"] != "fitted":
             out.append(f"| {r['face']} | {r['mask']} | refused: {r['reason'][:80]} |" + " |" * 10)
             continue
-        b, g = r["sizes"][r["best"]], r["sizes"][r["gauge"]]
+        b, g = r["sizes"][r["best"]], r["sizes"].get(r["gauge"], NOT_SEATED)
         out.append(f"| {r['face']} | {r['mask']} | {r['gauge']} | {r['best']} | {b['force_n']:.1f} | {b['leak_l_min']:.1f} "
                    f"| {b['pressure_max_kpa']:.2f} | {100 * b['window_fraction']:.0f} % | {100 * b['rim_covered_fraction']:.0f} % "
                    f"| {g['leak_l_min']:.1f} | {g['pressure_max_kpa']:.2f} | {'yes' if seals(r, r['best']) else 'no'} / "

@@ -120,8 +120,9 @@ class StockFitting:
                 for size, job in reversed(self.seats)}  # from the end: the sizes the worker is least likely to have started
         sizes = tuple(sorted((done[size] for size, _ in self.seats if done[size] is not None), key=StockFit.rank))
         if not sizes:
-            raise InputError(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) sits all the way "
-                             "round the mask axis over this scanned face at any seat")
+            raise InputError(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) finds its rim over "
+                             "this face at any seat: its wall does not run all the way round the mask axis over the face, "
+                             "or lies over too little scanned skin")
         compared = StockComparison(sizes, self.gauge, ())
         gauge_fit = compared.gauge_fit
         if not asleep:

@@ -64,7 +64,7 @@ def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():
     line naming it."""
     face = face_scaled(np.full(3, 0.7))
     assert seated("oronasal", "L", face) is None
-    with pytest.raises(InputError, match=r"no oronasal stock size tried \(L\) sits all the way round"):
+    with pytest.raises(InputError, match=r"no oronasal stock size tried \(L\) finds its rim over this face at any seat"):
         compared_stock("oronasal", face, "L", asleep=False)
 
 
