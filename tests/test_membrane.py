@@ -37,8 +37,8 @@ def test_a_flap_reaches_as_far_as_the_pressure_lays_it_on_the_skin():
 def test_a_sheet_is_as_thick_everywhere_once_refined_its_free_edge_too(thick):
     """A closed slab `thick` mm thick, 20 x 10 mm, in 12 long triangles, refined to 1 mm edges: every
     vertex reads the slab's thickness within 0.01 mm, the ones made on its end faces too (whose own
-    rays run 10-20 mm along the slab); a 0.5 mm one is all membrane, a 2.2 mm one all wall. A flap's
-    free edge read as wall made its tip the rim wherever it touched the side of the nose."""
+    rays run 10-20 mm along the slab); a 0.5 mm one is all membrane, a 2.2 mm one all wall. Read as
+    wall, a flap's free edge would be taken for the rim wherever it touches the side of the nose."""
     fine, thickness = refined(trimesh.creation.box((thick, 20.0, 10.0)))
     assert len(fine.vertices) > 200 and fine.edges_unique_length.max() <= REFINE_MM
     assert thickness == pytest.approx(np.full(len(thickness), thick), abs=0.01)

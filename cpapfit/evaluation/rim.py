@@ -204,8 +204,8 @@ def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
     inf on an open sheet)."""
     face = face_thickness_mm(cushion) if cushion.is_watertight else np.full(len(cushion.faces), np.inf)
     corner = vertex_thickness_mm(cushion, face)
-    edges = cushion.vertices[cushion.faces]
-    if np.linalg.norm(edges - np.roll(edges, 1, axis=1), axis=2).max() <= REFINE_MM:
+    points = cushion.vertices[cushion.faces]
+    if np.linalg.norm(points - np.roll(points, 1, axis=1), axis=2).max() <= REFINE_MM:
         return cushion, corner
     vertices, faces, source = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM, return_index=True)
     fine = trimesh.Trimesh(vertices, faces, process=False)
