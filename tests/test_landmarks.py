@@ -175,12 +175,20 @@ def test_bad_landmark_files(rotated_stl, tmp_path, cli, content, words):
     assert not (tmp_path / "o.json").exists()
 
 
+def cylinder_profile(radius: float, height: float, step: float) -> np.ndarray:
+    """(K, 2) mm: a closed cylinder's outline to revolve about its axis (radius, height), a point
+    every `step` mm along its ends and side."""
+    across, up = np.linspace(0.0, radius, round(radius / step) + 1), np.linspace(-height / 2, height / 2, round(height / step) + 1)
+    return np.vstack([np.c_[across, np.full_like(across, -height / 2)], np.c_[np.full_like(up, radius), up][1:-1],
+                      np.c_[across[::-1], np.full_like(across, height / 2)]])
+
+
 @pytest.mark.parametrize("shape", ["sphere", "box", "cylinder"])
 def test_shapes_that_are_not_faces_are_refused(shape, tmp_path, cli):
     mesh = {
         "sphere": lambda: trimesh.creation.icosphere(5, radius=90.0),
         "box": lambda: trimesh.creation.box([160.0, 200.0, 120.0]).subdivide_to_size(5.0),
-        "cylinder": lambda: trimesh.creation.cylinder(80.0, 200.0, sections=128).subdivide_to_size(5.0),
+        "cylinder": lambda: trimesh.creation.revolve(cylinder_profile(80.0, 200.0, 5.0), sections=128),
     }[shape]()
     mesh.export(tmp_path / f"{shape}.ply")
     code, _, err = cli("landmarks", tmp_path / f"{shape}.ply", "--out", tmp_path / "o.json")
