@@ -120,6 +120,8 @@ def fit_summary(fit: dict) -> str:
             f"CV {cv}, max {s['pressure_max_kpa']:.2f} kPa ({s['pressure_max_mmhg']:.0f} mmHg, {s['pressure_max_region']}), "
             f"{100 * s['window_fraction']:.0f} % in the safe window, leak {s['leak_l_min']:.2f} L/min, {seal}"
         )
+    if "stock_not_fitted" in fit:
+        lines.append(f"no stock cushion compared: {fit['stock_not_fitted']}")
     return "; ".join(lines)
 
 

@@ -22,6 +22,7 @@ from .evaluation.fit import CushionFit, Face, FitParams, at_force, face_of, fit_
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import FaceState, StateFit, fit_states, sleep_states, state_faces, state_params
 from .fabrication.dead_space import dead_space_ml, ring_clearance
+from .errors import InputError
 from .fabrication.files import SolidError, check_closed, check_solid
 from .fabrication.frame import Frame, build_frame
 from .fabrication.mould import mould
@@ -147,6 +148,7 @@ class Design:
     frame: Frame  # the rigid frame the cushion fits into: connector, vents, valve, headgear anchors
     frame_checks: dict  # `check_closed` of the frame
     dead_space_ml: float  # the air between the face and the connector's bore
+    stock_not_fitted: str = ""  # why no stock cushion is compared where one was asked for (no size seats on this face)
 
     def preload_at(self, points: np.ndarray) -> np.ndarray:
         """(K,) mm: the pre-load at the seal-curve point nearest each of (K, 3) `points`."""
@@ -215,13 +217,16 @@ def design(
     frame = build_frame(cushion, solid)
     frame_checks = check_closed(frame.mesh, "the frame")
     fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params, faces=asleep)
-    compared = None
+    compared, unfitted = None, ""
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
-        compared = fitting.comparison()
-        fits, states = fits | compared.fits, compared.beside(states)
+        try:
+            compared = fitting.comparison()
+            fits, states = fits | compared.fits, compared.beside(states)
+        except InputError as exc:  # no stock size seats on this face: the custom design stands, compared with none
+            unfitted = str(exc)
     return Design(al, reg, contact, cushion, solid, checks, judged.rim, judged.quality, preload, moulded.parts, moulded.draft,
-                  fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered))
+                  fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered), unfitted)
 
 
 @dataclass(frozen=True)

@@ -135,6 +135,7 @@ def design_record(d: Design, scan: Scan) -> dict:
         **evaluation_record(d.fits, d.fit_params),
         "states": states_record(d.fits, d.states, d.fit_params.cpap_cmh2o),
         **({"stock_fitting": d.stock.record()} if d.stock else {}),
+        **({"stock_not_fitted": d.stock_not_fitted} if d.stock_not_fitted else {}),
         "states_about": "the face asleep (`cpapfit.evaluation.states`): lying on the back with the jaw dropped (the ICT model's "
                         "jawOpen carried onto this face), the mask pushed across its axis or rolled by a pillow, the CPAP "
                         "range's ends; each cushion at its awake headgear force; the custom cushion's membrane is sized so that "

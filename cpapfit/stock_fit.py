@@ -60,12 +60,14 @@ class StockComparison:
     """The stock cushion a clinic would fit on a face, to set beside the custom one: the sizes
     tried, each at its best seat (`sizes`, best first), the size the gauge picks, and the best size
     pressed in each sleep state (`sleep_states`) at the force the clinic set for it (or none), and
-    the gauge's size too where it was tried and is not the best (`gauge_states`, else none)."""
+    the gauge's size too where it was tried and is not the best (`gauge_states`, else none); the
+    sizes tried that found no seat on the face (`not_seated`)."""
 
     sizes: tuple[StockFit, ...]
     gauge: str
     states: tuple[StateFit, ...]
     gauge_states: tuple[StateFit, ...] = ()
+    not_seated: tuple[str, ...] = ()
 
     @property
     def best(self) -> StockFit:
@@ -93,7 +95,7 @@ class StockComparison:
         return {"size": self.best.size, "gauge_size": self.gauge, **self.best.record(), "comfort_max_n": COMFORT_N,
                 "fitted": "seated on the nasal bridge and slid across the mask axis to its best seat; the headgear set "
                           f"{MARGIN:g} times the force that seals it, at most the comfort maximum",
-                "sizes_best_first": tried}
+                "sizes_best_first": tried, "not_seated": list(self.not_seated)}
 
 
 SIZE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_region")
@@ -123,7 +125,7 @@ class StockFitting:
             raise InputError(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) finds its rim over "
                              "this face at any seat: its wall does not run all the way round the mask axis over the face, "
                              "or lies over too little scanned skin")
-        compared = StockComparison(sizes, self.gauge, ())
+        compared = StockComparison(sizes, self.gauge, (), not_seated=tuple(size for size, _ in self.seats if done[size] is None))
         gauge_fit = compared.gauge_fit
         if not asleep:
             return compared

@@ -10,6 +10,7 @@ import pytest
 import trimesh
 from PIL import Image
 
+from records import written
 from cpapfit.cushion.generic import template_cushion
 from cpapfit.cushion.nurbs import MEMBRANE_ROWS
 from cpapfit.fabrication.files import SolidError
@@ -218,6 +219,21 @@ def test_the_summary_of_a_rim_with_no_scan_under_it_says_so():
     fit = {"mask": "nasal", "cushion": {"width_mm": 52.0, "height_mm": 50.0, "depth_mm": 40.0, "min_wall_mm": 2.01, "membrane_min_mm": 0.5},
            "fit_before_compression": {"rim_gap_median_mm": None, "rim_gap_max_mm": None, "rim_covered_fraction": 0.0}}
     assert design_summary(fit).endswith("rim-to-skin gap before pre-load no scan data under the rim")
+
+
+def test_a_face_no_stock_size_seats_on_is_designed_and_says_so(cli, tmp_path, phantom1_dir, placed1, monkeypatch):
+    """Every stock size asked for finds no seat on the face: the custom cushion is still designed,
+    fit.json (valid) and the report saying why no stock cushion is compared, the summary line too."""
+    import cpapfit.stock_fit as stock_fit
+
+    monkeypatch.setattr(stock_fit, "seated", lambda *args, **kwargs: None)
+    out = tmp_path / "out"
+    code, _, err = cli("design", phantom1_dir, "--mask", "nasal", "--stock", "gauge", "--out", out)
+    assert code == 0, err
+    fit = written(out / "fit.json")
+    assert "stock" not in fit and "stock_fitting" not in fit and fit["custom"]["leak_l_min"] <= 2.0
+    assert fit["stock_not_fitted"].startswith("no nasal stock size tried") and "no stock cushion compared: no nasal stock size" in err
+    assert "No stock cushion compared: no nasal stock size tried" in (out / "report.html").read_text()
 
 
 def test_a_twisted_seal_is_refused_with_what_to_do(cli, tmp_path, phantom1_dir, placed1, monkeypatch):

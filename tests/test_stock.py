@@ -8,6 +8,7 @@ from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, si
 from cpapfit.evaluation.fit import Face
 from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm
 from cpapfit.errors import InputError
+from cpapfit.report.page import cushion_label
 from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, compared_stock, gauge_size, seated
 from cpapfit.template import load_template
 
@@ -59,13 +60,18 @@ def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
 
 
 def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():
-    """The L oronasal cushion on the mean face shrunk to 0.7: from no seat does its wall run all the
+    """The L oronasal cushion on the mean face shrunk to 0.8: from no seat does its wall run all the
     way round the face, so it is not fitted (None); asked for alone, the comparison refuses in one
-    line naming it."""
-    face = face_scaled(np.full(3, 0.7))
+    line naming it; with every size tried, it is named among those with no seat (M too), the best
+    chosen from the others (S)."""
+    face = face_scaled(np.full(3, 0.8))
     assert seated("oronasal", "L", face) is None
     with pytest.raises(InputError, match=r"no oronasal stock size tried \(L\) finds its rim over this face at any seat"):
         compared_stock("oronasal", face, "L", asleep=False)
+    every = compared_stock("oronasal", face, "best", asleep=False)  # the best of the sizes that seat, L named as not
+    record = every.record()
+    assert every.not_seated == ("M", "L") and record["not_seated"] == ["M", "L"] and list(record["sizes_best_first"]) == ["S"]
+    assert "best size by fit" in cushion_label({"stock_fitting": record}, "stock")
 
 
 def test_a_design_sets_every_stock_size_beside_it_best_first(designed):

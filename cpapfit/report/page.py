@@ -121,7 +121,8 @@ def cushion_label(fit: dict, name: str) -> str:
         return f"stock cushion, size {stock.get('gauge_size', '?')} (the gauge's pick)"
     if name != "stock":
         return f"{name} cushion"
-    how = "best size by fit" if len(stock.get("sizes_best_first", {})) > 1 else "size as evaluated"
+    tried = len(stock.get("sizes_best_first", {})) + len(stock.get("not_seated", []))
+    how = "best size by fit" if tried > 1 else "size as evaluated"
     return f"stock cushion, size {stock.get('size', '?')} ({how}; the gauge picks {stock.get('gauge_size', '?')})"
 
 
@@ -139,9 +140,16 @@ def headline_table(fit: dict) -> str:
 
 
 def settings_line(fit: dict) -> str:
-    """The custom cushion's headgear force and the CPAP pressure."""
+    """The custom cushion's headgear force and the CPAP pressure; the stock sizes that found no seat,
+    or why no stock cushion is compared where one was asked for."""
     force = value_cell("headgear_force_n", fit["headgear_force_n"], "b")
-    return f'<p class="force">Headgear force: {force} N at a CPAP pressure of {value_cell("cpap_cmh2o", fit["cpap_cmh2o"], "b")} cmH₂O.</p>'
+    line = f'<p class="force">Headgear force: {force} N at a CPAP pressure of {value_cell("cpap_cmh2o", fit["cpap_cmh2o"], "b")} cmH₂O.</p>'
+    unseated = fit.get("stock_fitting", {}).get("not_seated")
+    if unseated:
+        line += f'<p class="stock-note">Stock sizes tried that find no seat on this face: {html.escape(", ".join(unseated))}.</p>'
+    if "stock_not_fitted" in fit:
+        line += f'<p class="stock-note">No stock cushion compared: {html.escape(fit["stock_not_fitted"])}.</p>'
+    return line
 
 
 def flatten(record: dict, prefix: str = "") -> list[tuple[str, object]]:
