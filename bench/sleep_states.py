@@ -30,7 +30,7 @@ import numpy as np
 import trimesh
 
 from cpapfit import __version__
-from cpapfit.errors import CpapfitError
+from cpapfit.errors import CpapfitError, NoStockSeat
 from cpapfit.evaluation.fit import face_of, fit_rim
 from cpapfit.evaluation.rim import find_rim
 from cpapfit.evaluation.states import AWAKE, FaceState, motions, moved, sleep_states, state_face, state_params
@@ -86,9 +86,13 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool)
     predicted = {AWAKE.name: d.fits} | {s.state.name: s.fits for s in d.states}
     faces = {(False, 0.0): face_of(*head(seed, source, 0.0, jaw), d.cushion.axis, d.cushion.up)}
     if stock:  # the best stock size, seated on the true face as a clinic seats it, at its own force
-        fitted = compared_stock(mask, faces[(False, 0.0)], fit_params=d.fit_params, asleep=False).best
-        row["stock"] = {"size": fitted.size, **fitted.record()}
-        pressed["stock"] = (*placed_stock(mask, fitted, faces[(False, 0.0)]), fitted.fit.force_n)
+        try:
+            fitted = compared_stock(mask, faces[(False, 0.0)], fit_params=d.fit_params, asleep=False).best
+        except NoStockSeat as exc:
+            row["stock"] = {"not_fitted": str(exc)[:200]}
+        else:
+            row["stock"] = {"size": fitted.size, **fitted.record()}
+            pressed["stock"] = (*placed_stock(mask, fitted, faces[(False, 0.0)]), fitted.fit.force_n)
     states = []
     for state in (AWAKE, *sleep_states(mask), FAR):
         key = (state.supine, state.mouth_open_mm)
@@ -141,7 +145,7 @@ def stock_tables(rows: list[dict]) -> str:
     """Markdown: custom beside the best stock size, per mask and state (shares of designs at most
     2 L/min and with the peak at most 4.3 kPa, medians), then per subject (in how many of the sleep
     states each seals at most 2 L/min and keeps its peak at most 4.3 kPa)."""
-    made = [r for r in rows if r["outcome"] == "made" and "stock" in r]
+    made = [r for r in rows if r["outcome"] == "made" and "size" in r.get("stock", {})]  # a stock size seated
     out = ["| mask | state | n | custom <= 2 L/min | custom peak <= 4.3 kPa | stock <= 2 L/min | stock peak <= 4.3 kPa "
            "| custom / stock peak median (kPa) |", "|---" * 8 + "|"]
     for mask in MASKS:

@@ -12,6 +12,10 @@ class InputError(CpapfitError):
     """A file is missing, empty, truncated, unreadable or holds impossible values."""
 
 
+class NoStockSeat(InputError):
+    """No stock size tried finds a seat on the face (its wall runs round the mask axis over it from none)."""
+
+
 class UnitsError(CpapfitError):
     """The scan's size fits no supported unit, or the stated unit is implausible."""
 

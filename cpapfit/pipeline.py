@@ -22,7 +22,7 @@ from .evaluation.fit import CushionFit, Face, FitParams, at_force, face_of, fit_
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import FaceState, StateFit, fit_states, sleep_states, state_faces, state_params
 from .fabrication.dead_space import dead_space_ml, ring_clearance
-from .errors import InputError
+from .errors import NoStockSeat
 from .fabrication.files import SolidError, check_closed, check_solid
 from .fabrication.frame import Frame, build_frame
 from .fabrication.mould import mould
@@ -222,9 +222,10 @@ def design(
         on_stage("the stock cushion a clinic would fit")
         try:
             compared = fitting.comparison()
-            fits, states = fits | compared.fits, compared.beside(states)
-        except InputError as exc:  # no stock size seats on this face: the custom design stands, compared with none
+        except NoStockSeat as exc:  # the custom design stands, compared with none
             unfitted = str(exc)
+        else:
+            fits, states = fits | compared.fits, compared.beside(states)
     return Design(al, reg, contact, cushion, solid, checks, judged.rim, judged.quality, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered), unfitted)
 

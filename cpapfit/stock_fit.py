@@ -21,7 +21,7 @@ import trimesh
 
 from .cushion.nurbs import CushionParams
 from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
-from .errors import InputError
+from .errors import InputError, NoStockSeat
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
 from .evaluation.states import StateFit, fit_states, merged, sleep_states
@@ -122,7 +122,7 @@ class StockFitting:
                 for size, job in reversed(self.seats)}  # from the end: the sizes the worker is least likely to have started
         sizes = tuple(sorted((done[size] for size, _ in self.seats if done[size] is not None), key=StockFit.rank))
         if not sizes:
-            raise InputError(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) finds its rim over "
+            raise NoStockSeat(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) finds its rim over "
                              "this face at any seat: its wall does not run all the way round the mask axis over the face, "
                              "or lies over too little scanned skin")
         compared = StockComparison(sizes, self.gauge, (), not_seated=tuple(size for size, _ in self.seats if done[size] is None))

@@ -8,7 +8,7 @@ from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, si
 from cpapfit.evaluation.fit import Face
 from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm
 from cpapfit.errors import InputError
-from cpapfit.report.page import cushion_label
+from cpapfit.report.page import cushion_label, settings_line
 from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, compared_stock, gauge_size, seated
 from cpapfit.template import load_template
 
@@ -68,10 +68,11 @@ def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():
     assert seated("oronasal", "L", face) is None
     with pytest.raises(InputError, match=r"no oronasal stock size tried \(L\) finds its rim over this face at any seat"):
         compared_stock("oronasal", face, "L", asleep=False)
-    every = compared_stock("oronasal", face, "best", asleep=False)  # the best of the sizes that seat, L named as not
+    every = compared_stock("oronasal", face, "best", asleep=False)
     record = every.record()
     assert every.not_seated == ("M", "L") and record["not_seated"] == ["M", "L"] and list(record["sizes_best_first"]) == ["S"]
     assert "best size by fit" in cushion_label({"stock_fitting": record}, "stock")
+    assert "Stock sizes tried that find no seat on this face: M, L." in settings_line({"headgear_force_n": 2.0, "cpap_cmh2o": 10.0, "stock_fitting": record})
 
 
 def test_a_design_sets_every_stock_size_beside_it_best_first(designed):
