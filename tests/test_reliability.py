@@ -201,17 +201,15 @@ def test_landmarks_off_the_skin_are_flagged(tmp_path, phantom1):
 def test_landmarks_off_along_the_skin_are_flagged_and_not_trusted(tmp_path, phantom1):
     """The true landmarks moved 4 mm (per axis) and put back on the skin (a careless file): on the
     skin, so the landmarks_mm gate passes them; far from their places on the face, so they are used
-    at the detected landmarks' weight and the design (the whole command) is flagged."""
+    at the detected landmarks' weight and the scan is flagged for their spread alone."""
     idx = np.arange(0, 468, 3)
     truth = trimesh.Trimesh(phantom1.surface, phantom1.faces, process=False)
     moved = phantom1.landmarks[idx] + np.random.default_rng(0).normal(0.0, 4.0, (len(idx), 3))
     (tmp_path / "lm.json").write_text(json.dumps({"points": truth.nearest.on_surface(moved)[0].tolist(), "template_index": idx.tolist()}))
-    write_files(tmp_path / "capture", capture_files(phantom1.image, phantom1.depth_raw, phantom1.intrinsics, phantom1.sensor.depth_scale))
-    code, err = run_design(tmp_path / "capture", "--landmarks", tmp_path / "lm.json", "--stock", "none", "--out", tmp_path / "out")
-    fit = written(tmp_path / "out" / "fit.json")
-    assert code == 0 and [w["code"] for w in fit["warnings"]] == ["landmark_spread_mm"] and "rescan advised" in err, err
-    assert fit["registration"]["landmark_weight_factor"] == pytest.approx(0.1)
-    assert fit["quality"]["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
+    judged = judged_gates(tmp_path, phantom1, landmarks=tmp_path / "lm.json")
+    assert judged.codes == ["landmark_spread_mm"], judged.messages
+    assert judged.placed.registration.landmark_factor == pytest.approx(0.1)
+    assert judged.quality["landmark_spread_mm"] > GATES.landmark_spread_flag_mm
 
 
 def test_a_colour_image_shifted_from_its_depth_is_flagged(tmp_path, phantom1):
