@@ -31,7 +31,6 @@ from cpapfit import __version__
 from cpapfit.cushion.nurbs import CushionParams
 from cpapfit.errors import CpapfitError
 from cpapfit.cushion.nurbs import MEMBRANE_LIFT, MEMBRANE_ROOT_MM
-from cpapfit.cushion.stock import MEMBRANE_MM
 from cpapfit.evaluation.calibration import sealed_opening, section_stiffness, strip_stiffness
 from cpapfit.evaluation.fe_membrane import Flap, NotConverged
 from cpapfit.evaluation.fit import KPA_PER_CMH2O
@@ -47,7 +46,7 @@ from cpapfit.template import MASKS
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 SECTIONS = 16
 WALL_MM, FLANGE_MM, FLAP_MM = CushionParams().wall_mm, CushionParams().flange_mm, CushionParams().membrane_mm
-FLAP_WIDTHS_MM = (3.0, 4.0, MEMBRANE_MM, 6.0, 8.0, 10.0)  # the envelope's 4-10 mm, the stock 5 mm, a narrow one
+FLAP_WIDTHS_MM = (3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # narrow flaps to the envelope's widest
 CPAP_CMH2O = (4.0, 10.0, 20.0)
 FLAP_CELLS = (48, 2)
 

@@ -5,8 +5,10 @@ import pytest
 import trimesh
 
 from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, size_scale, stock_cushion
-from cpapfit.evaluation.fit import Face
-from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm
+from cpapfit.cushion.envelope import REACH_MM
+from cpapfit.evaluation.fit import KPA_PER_CMH2O, Face
+from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm, reach_mm
+from cpapfit.evaluation.states import CPAP_RANGE_CMH2O
 from cpapfit.errors import InputError
 from cpapfit.report.page import cushion_label, settings_line
 from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, compared_stock, gauge_size, seated
@@ -50,13 +52,17 @@ def test_the_gauge_picks_the_size_made_for_a_face_that_size(size):
 
 def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
     """The M oronasal cushion on the face it was made on: seated within a millimetre of the nasal
-    bridge, sealed (no leak) at under COMFORT_N with its peak under the capillary pressure."""
+    bridge, sealed (no leak) at under COMFORT_N with its peak under the capillary pressure; its
+    membrane, sized to reach REACH_MM[0] at the lowest CPAP pressure, reaches 1.5 mm or more there
+    as measured on half its rim (the section from the rim point, not the flap's root)."""
     fit = seated("oronasal", "M", face_scaled(np.ones(3)))
     summary = fit.fit.summary()
     assert fit.sealed and fit.fit.force_n <= COMFORT_N
     assert np.abs(fit.offset_mm).max() <= 1.0
     assert summary["leak_l_min"] == 0.0 and summary["pressure_max_kpa"] < 4.3
     assert summary["rim_covered_fraction"] == 1.0
+    rim = fit.fit.rim
+    assert np.median(reach_mm(rim.membrane_mm, rim.membrane_thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)) >= REACH_MM[0] - 0.5
 
 
 def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from .contact import Contact, closed_resample
 from .generic import NOSE_TIP
-from .nurbs import AROUND, Cushion, design_cushion, flap_directions
+from .nurbs import AROUND, Cushion, CushionParams, design_cushion, flap_directions
 from .solid import with_membrane
 from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_force
 from ..evaluation.membrane import width_for
@@ -62,11 +62,16 @@ def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitP
 
 def membrane_widths(reach: np.ndarray, rim: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
     """(AROUND,) mm: the membrane's width at each control column of the seal curve for the `reach`
-    (SECTORS,) mm at the awake `rim` points (SECTORS, 3) nearest them, at most INWARD_SHARE of the
+    (SECTORS,) mm at the awake `rim` points (SECTORS, 3) nearest them (`flap_widths`)."""
+    return flap_widths(reach[cKDTree(rim).query(closed_resample(contact.curve, AROUND))[1]], contact, thickness_mm)
+
+
+def flap_widths(need: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
+    """(AROUND,) mm: at each control column of the seal curve the narrowest flap `thickness_mm`
+    thick that reaches `need` (AROUND,) mm at the lowest CPAP pressure, at most INWARD_SHARE of the
     width at which the column's flap meets either neighbour (`converging`)."""
     seal = closed_resample(contact.curve, AROUND)
     normals = trimesh.util.unitize(closed_resample(contact.curve, AROUND, contact.normals))
-    need = reach[cKDTree(rim).query(seal)[1]]
     width = width_for(need, thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)
     closing = converging(seal, flap_directions(seal, normals))
     return np.minimum(width, INWARD_SHARE / np.maximum(np.maximum(closing, np.roll(closing, 1)), 1e-9))
@@ -88,15 +93,25 @@ def enveloped_cushion(
 ) -> tuple[Cushion, trimesh.Trimesh, float]:
     """(the cushion with its membrane, its printable solid, the membrane's thinnest wall mm): the
     `cushion` (its `wall` solid pressed onto the face as `awake`, at the force the states keep)
-    given the membrane the predicted states need; narrowed where its sheet would twist
-    (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
-    SHRINKS times each. `faces`: the face in each sleep state where already made (`state_faces`)."""
+    given the membrane the predicted states need (`with_flaps`). `faces`: the face in each sleep
+    state where already made (`state_faces`)."""
     params = cushion.params
     states = fit_states({"custom": wall}, face, sleep_states(cushion.mask), params.flange_mm, awake.force_n, fit_params,
                         {"custom": awake}, faces=faces)
     widths = membrane_widths(needed_reach(states, awake), awake.rim.points, contact, params.membrane_mm)
+    return with_flaps(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered, wall)
+
+
+def with_flaps(
+    contact: Contact, axis: np.ndarray, up: np.ndarray, nose_tip: np.ndarray, params: CushionParams, preload_mm: np.ndarray | None,
+    widths: np.ndarray, skin: trimesh.Trimesh, wall: trimesh.Trimesh,
+) -> tuple[Cushion, trimesh.Trimesh, float]:
+    """(the cushion with its membrane, its printable solid, the membrane's thinnest wall mm): the
+    design (`design_cushion` of these arguments) given flaps of `widths` (AROUND,) mm, its `wall`
+    solid joined to them; narrowed where the membrane's sheet would twist (`twisted_columns`), and
+    everywhere while its solid would cross itself, by SHRINK at most SHRINKS times each."""
     for _ in range(SHRINKS + 1):
-        sized = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered)
+        sized = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
         twisted = twisted_columns(sized.membrane_grid())
         if not twisted.any():
             break
@@ -106,7 +121,7 @@ def enveloped_cushion(
         if self_intersecting_edges(solid) == 0:
             break
         widths = SHRINK * widths
-        sized = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered)
+        sized = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
     return sized, solid, thinnest
 
 

@@ -1,8 +1,11 @@
 """Stock cushions: a family of sizes made for no one patient.
 
 Each mask's cushion is the design on the ICT Face Model's mean face (its neutral, carried onto the
-template), with no pre-load (a stock cushion is compensated for no one) and a self-sealing membrane
-MEMBRANE_MM wide all round, as stock silicone cushions have. Sizes scale it about the nasal bridge
+template), with no pre-load (a stock cushion is compensated for no one) and a self-sealing membrane,
+as stock silicone cushions have, sized by the custom cushion's rule for its awake slack: every
+flap reaches REACH_MM[0] at the lowest CPAP pressure (`envelope.flap_widths`, narrowed where its
+sheet would twist, `envelope.with_flaps`); the states of no one face widen it further. The flap is
+not measured from a real stock cushion. Sizes scale it about the nasal bridge
 (template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
 one the nasal bridge to just below the lower lip (168-18). Over POPULATION faces drawn from the
@@ -17,11 +20,11 @@ import trimesh
 
 from ..ict import ict_face, load_ict, random_subject, template_truth
 from ..template import load_template
+from .envelope import REACH_MM, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
-from .solid import cushion_solid, with_membrane
+from .solid import cushion_solid
 
-MEMBRANE_MM = 5.0
 POPULATION = 200
 SIZE_PERCENTILES = {"S": 15.0, "M": 50.0, "L": 85.0}
 GAUGE = {"nasal": (129, 358), "oronasal": (168, 18)}  # template landmarks the gauge measures between
@@ -70,6 +73,7 @@ def stock_cushion(mask: str, size: str, params: CushionParams = CushionParams())
     scaled = (face - bridge) * scale + bridge
     skin = trimesh.Trimesh(scaled, load_template().faces, process=False)
     contact = contact_on(mask, skin)
-    cushion = design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params, None, np.full(AROUND, MEMBRANE_MM), skin)
-    wall = cushion_solid(cushion, contact.normals)[0]
-    return cushion, with_membrane(cushion, wall, contact.normals)[0]
+    wall = cushion_solid(design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params), contact.normals)[0]
+    widths = flap_widths(np.full(AROUND, REACH_MM[0]), contact, params.membrane_mm)
+    cushion, solid, _ = with_flaps(contact, AXIS, UP, scaled[NOSE_TIP], params, None, widths, skin, wall)
+    return cushion, solid
