@@ -102,12 +102,14 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool)
             faces[key] = state_face(on, motions(truth).supine) if state.supine else on
         params = state_params(state, d.fit_params)
         on = faces[key]
-        try:
-            true = {n: fit_rim(find_rim(moved(m, on, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up,
-                                        thickness=t), on, width, f, params).summary()
-                    for n, (m, t, f) in pressed.items()}
-        except CpapfitError as exc:
-            return {**row, "outcome": "not evaluated", "reason": f"{state.name}: {exc}"[:200]}
+        true = {}
+        for n, (m, t, f) in pressed.items():  # a compared cushion whose rim is not found here is left out of this state
+            try:
+                true[n] = fit_rim(find_rim(moved(m, on, state.shift_mm, state.roll_deg), on.scan, on.registered, on.axis, on.up,
+                                           thickness=t), on, width, f, params).summary()
+            except CpapfitError as exc:
+                if n == "custom":
+                    return {**row, "outcome": "not evaluated", "reason": f"{state.name}: {exc}"[:200]}
         pred = {n: f.summary() for n, f in predicted.get(state.name, {}).items()}
         states.append({"name": state.name, **{f"{kind}_{n}": {k: s[k] for k in KEYS} for kind, by in (("true", true), ("predicted", pred))
                                                for n, s in by.items()}})
@@ -128,7 +130,7 @@ def table(rows: list[dict]) -> str:
         for i, name in enumerate(s["name"] for s in made[0]["states"]):
             got = [r["states"][i] for r in made]
             true = np.array([s["true_custom"]["leak_l_min"] for s in got])
-            gen = np.array([s["true_generic"]["leak_l_min"] for s in got])
+            gen = np.array([s["true_generic"]["leak_l_min"] for s in got if "true_generic" in s])
             pairs = [(s["predicted_custom"]["leak_l_min"], s["true_custom"]["leak_l_min"]) for s in got if "predicted_custom" in s]
             close = [abs(p - t) <= max(2.0, 0.3 * t) for p, t in pairs]
             worst = max((abs(p - t) for p, t in pairs), default=float("nan"))
@@ -151,8 +153,9 @@ def stock_tables(rows: list[dict]) -> str:
     for mask in MASKS:
         got = [r for r in made if r["mask"] == mask]
         for i, name in enumerate(s["name"] for s in got[0]["states"] if got):
-            share = lambda n, k, lim: 100 * np.mean([r["states"][i][f"true_{n}"][k] <= lim for r in got])  # noqa: E731
-            med = lambda n: np.median([r["states"][i][f"true_{n}"]["pressure_max_kpa"] for r in got])  # noqa: E731
+            on = lambda n: [r["states"][i][f"true_{n}"] for r in got if f"true_{n}" in r["states"][i]]  # noqa: E731 (pressed there)
+            share = lambda n, k, lim: 100 * np.mean([s[k] <= lim for s in on(n)])  # noqa: E731
+            med = lambda n: np.median([s["pressure_max_kpa"] for s in on(n)])  # noqa: E731
             out.append(f"| {mask} | {name} | {len(got)} | {share('custom', 'leak_l_min', 2.0):.0f} % "
                        f"| {share('custom', 'pressure_max_kpa', 4.3):.0f} % | {share('stock', 'leak_l_min', 2.0):.0f} % "
                        f"| {share('stock', 'pressure_max_kpa', 4.3):.0f} % | {med('custom'):.2f} / {med('stock'):.2f} |")
@@ -160,7 +163,7 @@ def stock_tables(rows: list[dict]) -> str:
                 "| sleep states peak <= 4.3 kPa, custom / stock |", "|---" * 7 + "|"]
     for r in made:
         asleep = r["states"][1:-1]  # the sleep states (not awake, not the mask 10 mm off)
-        count = lambda n, k, lim: sum(s[f"true_{n}"][k] <= lim for s in asleep)  # noqa: E731
+        count = lambda n, k, lim: sum(s[f"true_{n}"][k] <= lim for s in asleep if f"true_{n}" in s)  # noqa: E731
         out.append(f"| {r['seed']} | {r['mask']} | {r['stock']['size']} | {r['stock']['headgear_force_n']:.1f} | {r['force_n']:.1f} "
                    f"| {count('custom', 'leak_l_min', 2.0)} / {count('stock', 'leak_l_min', 2.0)} of {len(asleep)} "
                    f"| {count('custom', 'pressure_max_kpa', 4.3)} / {count('stock', 'pressure_max_kpa', 4.3)} |")
