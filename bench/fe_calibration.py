@@ -46,7 +46,7 @@ from cpapfit.template import MASKS
 FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 SECTIONS = 16
 WALL_MM, FLANGE_MM, FLAP_MM = CushionParams().wall_mm, CushionParams().flange_mm, CushionParams().membrane_mm
-FLAP_WIDTHS_MM = (3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # narrow flaps to the envelope's widest
+FLAP_WIDTHS_MM = (3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # narrow flaps to about the envelope's width
 CPAP_CMH2O = (4.0, 10.0, 20.0)
 FLAP_CELLS = (48, 2)
 

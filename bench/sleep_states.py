@@ -110,6 +110,7 @@ def _measured(seed: int, mask: str, scan, placed, source, jaw: str, stock: bool)
             except CpapfitError as exc:
                 if n == "custom":
                     return {**row, "outcome": "not evaluated", "reason": f"{state.name}: {exc}"[:200]}
+                row.setdefault("left_out", []).append(f"{n} in {state.name}: {exc}"[:200])
         pred = {n: f.summary() for n, f in predicted.get(state.name, {}).items()}
         states.append({"name": state.name, **{f"{kind}_{n}": {k: s[k] for k in KEYS} for kind, by in (("true", true), ("predicted", pred))
                                                for n, s in by.items()}})
@@ -146,7 +147,9 @@ def table(rows: list[dict]) -> str:
 def stock_tables(rows: list[dict]) -> str:
     """Markdown: custom beside the best stock size, per mask and state (shares of designs at most
     2 L/min and with the peak at most 4.3 kPa, medians), then per subject (in how many of the sleep
-    states each seals at most 2 L/min and keeps its peak at most 4.3 kPa)."""
+    states each seals at most 2 L/min and keeps its peak at most 4.3 kPa). A cushion left out of a
+    state (its rim not found there, `left_out`) is out of that state's shares and meets neither
+    bound in its subject's counts."""
     made = [r for r in rows if r["outcome"] == "made" and "size" in r.get("stock", {})]  # a stock size seated
     out = ["| mask | state | n | custom <= 2 L/min | custom peak <= 4.3 kPa | stock <= 2 L/min | stock peak <= 4.3 kPa "
            "| custom / stock peak median (kPa) |", "|---" * 8 + "|"]

@@ -46,7 +46,7 @@ def test_a_flap_laid_on_the_skin_carries_the_air_pressure_and_balances_it():
 
 
 def test_the_membrane_law_is_the_flap_laid_on_the_skin_by_finite_elements():
-    """A flat 5 mm, 0.5 mm flap (the stock width) at 4 cmH2O: the finite elements seal an opening
+    """A flat 5 mm, 0.5 mm flap at 4 cmH2O: the finite elements seal an opening
     of 0.06 mm (lying 2 mm on the skin), the plate laid on a plane a thickness sooner, P a^4 / (72 D)
     with a = w - 2 mm + t, within 0.02 mm; the law for the designed flap takes off its rest lift and
     stand-off (nothing left; an 8 mm flap's drop is short by LARGE drop / a, large deflection), where

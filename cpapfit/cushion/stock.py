@@ -4,7 +4,7 @@ Each mask's cushion is the design on the ICT Face Model's mean face (its neutral
 template), with no pre-load (a stock cushion is compensated for no one) and a self-sealing membrane,
 as stock silicone cushions have, sized by the custom cushion's rule for its awake slack: every
 flap reaches REACH_MM[0] at the lowest CPAP pressure (`envelope.flap_widths`, narrowed where its
-sheet would twist, `envelope.with_flaps`); the states of no one face widen it further. The flap is
+sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The flap is
 not measured from a real stock cushion. Sizes scale it about the nasal bridge
 (template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
