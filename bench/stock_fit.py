@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from cpapfit import __version__
-from cpapfit.errors import CpapfitError
+from cpapfit.errors import CpapfitError, NoStockSeat
 from cpapfit.ict import load_ict
 from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
@@ -48,7 +48,7 @@ def run(job: tuple[str, str, Path | None]) -> list[dict]:
         t0 = time.perf_counter()
         try:
             compared = compared_stock(mask, face, asleep=False)
-        except CpapfitError as exc:
+        except NoStockSeat as exc:
             rows.append({"face": name, "mask": mask, "outcome": "refused", "reason": str(exc)[:200]})
             continue
         fits = {f.size: f for f in compared.sizes}

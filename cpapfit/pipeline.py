@@ -21,8 +21,8 @@ from .cushion.envelope import enveloped_cushion, headgear_force
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
 from .evaluation.states import FaceState, StateFit, fit_states, sleep_states, state_faces, state_params
-from .fabrication.dead_space import dead_space_ml, ring_clearance
 from .errors import NoStockSeat
+from .fabrication.dead_space import dead_space_ml, ring_clearance
 from .fabrication.files import SolidError, check_closed, check_solid
 from .fabrication.frame import Frame, build_frame
 from .fabrication.mould import mould
