@@ -10,13 +10,14 @@
    (the two bounds of a flange that grips), beside the fast model's flange spring
    (`TissueModel.cushion_kpa_per_mm`), and what the two in series give.
 4. With --membrane, instead: the membrane (`cpapfit.evaluation.fe_membrane`, geometrically nonlinear):
-   for flaps of the cushions' thickness and widths at CPAP 4, 10 and 20 cmH2O, the largest seal
+   for flaps of the cushions' thickness (or --thickness) and widths at CPAP 4, 10 and 20 cmH2O, the largest seal
    opening at which the flap still lies BAND_MM on the skin (`sealed_opening`), as designed (its
    root's stand-off and rest lift) and flat, on a rigid skin and on the softest region's, beside the
    fast model's `reach_mm`, the same law for a flat flap, and a free cantilever's tip deflection,
    min(w - BAND_MM, P w^4 / (8 D)); nan where Newton's iterations fail.
 
-Usage: .venv/bin/python bench/fe_calibration.py [--seeds 6] [--first 8000] [--model NPZ | --model shipped] [--membrane [--widths MM ...]]
+Usage: .venv/bin/python bench/fe_calibration.py [--seeds 6] [--first 8000] [--model NPZ | --model shipped]
+       [--membrane [--widths MM ...] [--thickness MM]]
 """
 
 import argparse
@@ -83,11 +84,11 @@ def sealed_or_none(flap: Flap, cpap_kpa: float, spring: float | None = None) -> 
         return np.nan, np.nan
 
 
-def membrane_table(widths: tuple[float, ...]) -> None:
+def membrane_table(widths: tuple[float, ...], thickness: float = FLAP_MM) -> None:
     """The membrane's sealed opening by finite elements beside the fast model's reach (module docstring)."""
     soft = min(REGIONS.values(), key=lambda r: r[2])
-    rigidity = bending_stiffness(FLAP_MM)
-    print(f"membrane {FLAP_MM:g} mm silicone (E 1 MPa, nu 0.49), mesh {FLAP_CELLS[0]} x {FLAP_CELLS[1]} quadratic triangles, "
+    rigidity = bending_stiffness(thickness)
+    print(f"membrane {thickness:g} mm silicone (E 1 MPa, nu 0.49), mesh {FLAP_CELLS[0]} x {FLAP_CELLS[1]} quadratic triangles, "
           f"band {BAND_MM:g} mm; designed: root {MEMBRANE_ROOT_MM[1]:g} mm off the skin, rest lift {MEMBRANE_LIFT:g}; "
           f"soft skin {soft[2]:.2f} kPa/mm (the softest region's spring)\n")
     print("| width (mm) | CPAP (cmH2O) | free cantilever | reach_mm | FE designed, rigid | law, flat flap | FE flat, rigid "
@@ -95,13 +96,13 @@ def membrane_table(widths: tuple[float, ...]) -> None:
     for width in widths:
         for cmh2o in CPAP_CMH2O:
             p = cmh2o * KPA_PER_CMH2O
-            flat = Flap(width, FLAP_MM, cells=FLAP_CELLS)
-            designed = Flap(width, FLAP_MM, MEMBRANE_ROOT_MM[1], MEMBRANE_LIFT, FLAP_CELLS)
+            flat = Flap(width, thickness, cells=FLAP_CELLS)
+            designed = Flap(width, thickness, MEMBRANE_ROOT_MM[1], MEMBRANE_LIFT, FLAP_CELLS)
             cantilever = min(width - BAND_MM, p * width**4 / (8.0 * rigidity))
-            laid_flat = min(p * (width - BAND_MM + FLAP_MM) ** 4 / (72.0 * rigidity), width - BAND_MM)
+            laid_flat = min(p * (width - BAND_MM + thickness) ** 4 / (72.0 * rigidity), width - BAND_MM)
             rigid, soft_g = sealed_or_none(flat, p)[0], sealed_or_none(flat, p, soft[2])[0]
             lifted, lies = sealed_or_none(designed, p)
-            law = float(reach_mm(np.array([width]), np.array([FLAP_MM]), p)[0])
+            law = float(reach_mm(np.array([width]), np.array([thickness]), p)[0])
             print(f"| {width:g} | {cmh2o:g} | {cantilever:.2f} | {law:.2f} | {lifted:.2f} | {laid_flat:.2f} | {rigid:.2f} | {soft_g:.2f} "
                   f"| {lies:.2f} |", flush=True)
 
@@ -113,12 +114,13 @@ def main() -> None:
     ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped")
     ap.add_argument("--membrane", action="store_true", help="the membrane's sealed opening instead")
     ap.add_argument("--widths", type=float, nargs="+", default=FLAP_WIDTHS_MM, help="the membrane's widths, mm")
+    ap.add_argument("--thickness", type=float, default=FLAP_MM, help="the membrane's thickness, mm (the design's thinnest: 0.3)")
     args = ap.parse_args()
     source = None if str(args.model) == "shipped" else Path(args.model).resolve()
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}")
     t0 = time.perf_counter()
     if args.membrane:
-        membrane_table(tuple(args.widths))
+        membrane_table(tuple(args.widths), args.thickness)
         print(f"\ntotal time {time.perf_counter() - t0:.0f} s")
         return
     print("\n| case | computed | closed form | error |\n|---|---|---|---|")

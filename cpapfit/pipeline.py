@@ -211,7 +211,7 @@ def design(
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
     asleep = state_faces(face, sleep_states(mask))
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake, asleep)
-    checks = _checked(cushion, solid, (wall, params.wall_mm), (membrane, params.membrane_mm), f"the {mask} cushion", al.landmarks.path)
+    checks = _checked(cushion, solid, (wall, params.wall_mm), membrane, f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould, frame")
     moulded = mould(cushion, solid)
     frame = build_frame(cushion, solid)
@@ -262,8 +262,8 @@ def assessed(scan: Scan, mask: str, placement: Placement, params: CushionParams 
 
 def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str,
              landmarks_path: str) -> dict:
-    """`check_solid` of a custom cushion (`wall`, `membrane`: thinnest measured and set thickness,
-    mm). A cushion crossing itself is refused with its cause: its wall's surface crossing itself (a
+    """`check_solid` of a custom cushion (`wall`, `membrane`: measured and set thickness, mm, where
+    thinnest against the set). A cushion crossing itself is refused with its cause: its wall's surface crossing itself (a
     twisted seal curve, which a well-placed template does not carry: the refusal says what to do),
     its membrane's surface crossing itself, or, both clean, its solid folding where a surface bends
     tighter than it is thick."""

@@ -4,15 +4,22 @@ The wall, with its pressure-compensating pre-load, is pressed onto each state of
 predicted from the patient's registered template (the jaw dropped, the mask pushed and rolled by a
 pillow, the CPAP range) at the awake headgear force. At each rim point the widest seal opening over
 the states it stays on in (a state that lifts the mask off the face is a matter of headgear force,
-not of the seal), over the WINDOW sectors beside it, grown by MARGIN_MM and MARGIN_SHARE for the
-prediction's doubt, is the reach its membrane needs, within REACH_MM. The membrane's width is the
-narrowest flap of the cushion's membrane thickness that reaches that far at the lowest CPAP
-pressure (`evaluation.membrane.width_for`), and at most INWARD_SHARE of the width at which it and its
-neighbours would meet (where the seal curve bends tightly inwards, beside a nostril, the flaps
-fan out across the bend, `flap_directions`, but still run together). Wherever the
-membrane's sheet still turns back on itself or closes up across the seal (`twisted_columns`),
-those columns narrow by SHRINK, and the whole membrane while its solid would cross itself.
+not of the seal) that are pressed at one CPAP pressure (the awake face and the states without a
+pressure of their own at the awake one, the range's ends at theirs), over the WINDOW sectors beside
+it, grown by MARGIN_MM and MARGIN_SHARE for the prediction's doubt, is the reach its membrane needs
+at that pressure, at most REACH_MM[1]; and REACH_MM[0] at the lowest pressure everywhere (the
+awake seal's slack). The membrane's width is the narrowest flap of the cushion's membrane
+thickness that reaches each of those at its pressure (`evaluation.membrane.width_for`), and at
+most INWARD_SHARE of the width at which it and its neighbours would meet (where the seal curve
+bends tightly inwards, beside a nostril, the flaps fan out across the bend, `flap_directions`, but
+still run together). Wherever the membrane's sheet still turns back on itself or closes up across
+the seal (`twisted_columns`), those columns narrow by SHRINK, and the whole membrane while its
+solid would cross itself. Where a flap so narrowed no longer reaches its need, its sheet is
+thinner, down to THINNEST_MM (`flap_thickness`): the reach grows as the cube of the thickness
+falls, so a flap that cannot widen still closes the opening.
 """
+
+from dataclasses import replace
 
 import numpy as np
 import trimesh
@@ -24,7 +31,7 @@ from .generic import NOSE_TIP
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion, flap_directions
 from .solid import with_membrane
 from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_force
-from ..evaluation.membrane import width_for
+from ..evaluation.membrane import reach_mm, width_for
 from ..evaluation.rim import SECTORS
 from ..solids import self_intersecting_edges
 from ..evaluation.states import CPAP_RANGE_CMH2O, FaceState, StateFit, fit_states, sleep_states
@@ -34,19 +41,27 @@ REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's sl
 WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
 INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
 SHRINK, SHRINKS = 0.75, 6
+THINNEST_MM = 0.3  # the thinnest membrane: the reach law holds to the finite elements within 0.15 mm down to it (section 15)
+THICKNESS_STEPS = 20  # bisection steps for a flap's thickness: to 0.2 um
 PEAK_MARGIN_KPA = 0.4  # the headgear force stops where the awake peak comes this far under capillary closing (the prediction's doubt)
 CLOSING = 1.0 - INWARD_SHARE  # a sheet row closes up where its step around is under this share of its root's
+LOWEST_CPAP_KPA = CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O
 
 
-def needed_reach(states: tuple[StateFit, ...], awake: CushionFit) -> np.ndarray:
-    """(SECTORS,) mm: the reach the membrane needs at each rim sector (module docstring)."""
-    widest = np.nan_to_num(awake.opening_mm)
+def needed_reach(states: tuple[StateFit, ...], awake: CushionFit, awake_kpa: float) -> dict[float, np.ndarray]:
+    """{CPAP kPa: (SECTORS,) mm}: the reach the membrane needs at each rim sector at each pressure
+    the face is pressed at (`awake` and the states without a CPAP pressure of their own at
+    `awake_kpa`), and the awake seal's slack at the lowest (module docstring)."""
+    widest = {awake_kpa: np.nan_to_num(awake.opening_mm)}
     for fits in states:
         fit = fits.fits.get("custom")
         if fit is not None and not fit.pressed.lifted:
-            widest = np.maximum(widest, np.nan_to_num(fit.opening_mm))
-    widest = maximum_filter1d(widest, size=2 * WINDOW + 1, mode="wrap")
-    return np.clip(widest * (1.0 + MARGIN_SHARE) + MARGIN_MM, *REACH_MM)
+            kpa = awake_kpa if fits.state.cpap_cmh2o is None else fits.state.cpap_cmh2o * KPA_PER_CMH2O
+            widest[kpa] = np.maximum(widest.get(kpa, 0.0), np.nan_to_num(fit.opening_mm))
+    need = {kpa: np.minimum(maximum_filter1d(w, size=2 * WINDOW + 1, mode="wrap") * (1.0 + MARGIN_SHARE) + MARGIN_MM, REACH_MM[1])
+            for kpa, w in widest.items()}
+    need[LOWEST_CPAP_KPA] = np.maximum(need.get(LOWEST_CPAP_KPA, 0.0), REACH_MM[0])
+    return need
 
 
 def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitParams) -> float:
@@ -60,21 +75,38 @@ def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitP
     return max(awake.force_n, min(max([most if f is None else f for f in need]), most))
 
 
-def membrane_widths(reach: np.ndarray, rim: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
-    """(AROUND,) mm: the membrane's width at each control column of the seal curve for the `reach`
-    (SECTORS,) mm at the awake `rim` points (SECTORS, 3) nearest them (`flap_widths`)."""
-    return flap_widths(reach[cKDTree(rim).query(closed_resample(contact.curve, AROUND))[1]], contact, thickness_mm)
+def column_need(need: dict[float, np.ndarray], rim: np.ndarray, contact: Contact) -> dict[float, np.ndarray]:
+    """{CPAP kPa: (AROUND,) mm}: the `need` {CPAP kPa: (SECTORS,) mm} at the awake `rim` points
+    (SECTORS, 3) nearest each control column of the seal curve."""
+    nearest = cKDTree(rim).query(closed_resample(contact.curve, AROUND))[1]
+    return {kpa: reach[nearest] for kpa, reach in need.items()}
 
 
-def flap_widths(need: np.ndarray, contact: Contact, thickness_mm: float) -> np.ndarray:
+def flap_widths(need: dict[float, np.ndarray], contact: Contact, thickness_mm: float) -> np.ndarray:
     """(AROUND,) mm: at each control column of the seal curve the narrowest flap `thickness_mm`
-    thick that reaches `need` (AROUND,) mm at the lowest CPAP pressure, at most INWARD_SHARE of the
-    width at which the column's flap meets either neighbour (`converging`)."""
+    thick that reaches `need` {CPAP kPa: (AROUND,) mm} at each of those pressures, at most
+    INWARD_SHARE of the width at which the column's flap meets either neighbour (`converging`)."""
     seal = closed_resample(contact.curve, AROUND)
     normals = trimesh.util.unitize(closed_resample(contact.curve, AROUND, contact.normals))
-    width = width_for(need, thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)
+    width = np.max([width_for(reach, thickness_mm, kpa) for kpa, reach in need.items()], axis=0)
     closing = converging(seal, flap_directions(seal, normals))
     return np.minimum(width, INWARD_SHARE / np.maximum(np.maximum(closing, np.roll(closing, 1)), 1e-9))
+
+
+def flap_thickness(need: dict[float, np.ndarray], widths: np.ndarray, thickness_mm: float) -> np.ndarray:
+    """(AROUND,) mm: at each control column the thickest membrane, from THINNEST_MM to
+    `thickness_mm`, whose flap `widths` (AROUND,) mm wide reaches `need` {CPAP kPa: (AROUND,) mm}
+    at each of those pressures (bisection: the reach falls as the sheet thickens); THINNEST_MM
+    where none does."""
+    def reaches(thickness: np.ndarray) -> np.ndarray:
+        return np.all([reach_mm(widths, thickness, kpa) >= reach for kpa, reach in need.items()], axis=0)
+
+    lo, hi = np.full(len(widths), THINNEST_MM), np.full(len(widths), float(thickness_mm))
+    for _ in range(THICKNESS_STEPS):
+        mid = 0.5 * (lo + hi)
+        ok = reaches(mid)
+        lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+    return np.where(reaches(np.full(len(widths), float(thickness_mm))), thickness_mm, lo)
 
 
 def converging(roots: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -98,20 +130,28 @@ def enveloped_cushion(
     params = cushion.params
     states = fit_states({"custom": wall}, face, sleep_states(cushion.mask), params.flange_mm, awake.force_n, fit_params,
                         {"custom": awake}, faces=faces)
-    widths = membrane_widths(needed_reach(states, awake), awake.rim.points, contact, params.membrane_mm)
-    return with_flaps(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered, wall)
+    need = column_need(needed_reach(states, awake, fit_params.cpap_kpa), awake.rim.points, contact)
+    widths = flap_widths(need, contact, params.membrane_mm)
+    return with_flaps(contact, face.axis, face.up, warped[NOSE_TIP], params, preload_mm, widths, face.registered, wall, need)
 
 
 def with_flaps(
     contact: Contact, axis: np.ndarray, up: np.ndarray, nose_tip: np.ndarray, params: CushionParams, preload_mm: np.ndarray | None,
-    widths: np.ndarray, skin: trimesh.Trimesh, wall: trimesh.Trimesh,
-) -> tuple[Cushion, trimesh.Trimesh, float]:
-    """(the cushion with its membrane, its printable solid, the membrane's thinnest wall mm): the
-    design (`design_cushion` of these arguments) given flaps of `widths` (AROUND,) mm, its `wall`
-    solid joined to them; narrowed where the membrane's sheet would twist (`twisted_columns`), and
-    everywhere while its solid would cross itself, by SHRINK at most SHRINKS times each."""
+    widths: np.ndarray, skin: trimesh.Trimesh, wall: trimesh.Trimesh, need: dict[float, np.ndarray] | None = None,
+) -> tuple[Cushion, trimesh.Trimesh, tuple[float, float]]:
+    """(the cushion with its membrane, its printable solid, (the membrane's wall, its set thickness)
+    mm where thinnest against it): the design (`design_cushion` of these arguments) given flaps of
+    `widths` (AROUND,) mm, its `wall` solid joined to them; narrowed where the membrane's sheet would
+    twist (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
+    SHRINKS times each. `need` {CPAP kPa: (AROUND,) mm}: the reach each column's flap must have at
+    each pressure; where a flap is narrower than reaches it, its sheet is thinner
+    (`flap_thickness`); None: `params.membrane_mm` throughout."""
+    def sized_for(widths: np.ndarray) -> Cushion:
+        flaps = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
+        return flaps if need is None else replace(flaps, membrane_thickness=flap_thickness(need, widths, params.membrane_mm))
+
     for _ in range(SHRINKS + 1):
-        sized = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
+        sized = sized_for(widths)
         twisted = twisted_columns(sized.membrane_grid())
         if not twisted.any():
             break
@@ -121,7 +161,7 @@ def with_flaps(
         if self_intersecting_edges(solid) == 0:
             break
         widths = SHRINK * widths
-        sized = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
+        sized = sized_for(widths)
     return sized, solid, thinnest
 
 

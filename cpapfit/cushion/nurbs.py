@@ -51,8 +51,9 @@ class CushionParams:
 @dataclass(frozen=True)
 class Cushion:
     """control: (AROUND, ROWS, 3) mm control points of the wall; membrane: (AROUND, MEMBRANE_ROWS, 3)
-    mm control points of the membrane (None: none); axis, up: unit mask axis (out of the face) and
-    head-up direction; mask: "nasal" | "oronasal"."""
+    mm control points of the membrane (None: none), membrane_thickness: (AROUND,) mm at each of its
+    control columns (None: `params.membrane_mm` throughout); axis, up: unit mask axis (out of the
+    face) and head-up direction; mask: "nasal" | "oronasal"."""
 
     mask: str
     control: np.ndarray
@@ -60,6 +61,7 @@ class Cushion:
     up: np.ndarray
     params: CushionParams
     membrane: np.ndarray | None = None
+    membrane_thickness: np.ndarray | None = None
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -75,6 +77,14 @@ class Cushion:
     def membrane_grid(self, n_u: int = 128, n_v: int = 8) -> np.ndarray:
         """(n_u, n_v, 3) points of the membrane: u around the seal, v from its root to its free edge."""
         return surface_grid(self.membrane, n_u, n_v)
+
+    def membrane_thickness_at(self, n_u: int = 128) -> np.ndarray:
+        """(n_u,) mm: the membrane's thickness at the n_u points around the seal of `membrane_grid`
+        (its k-th on the seal point of control column k AROUND / n_u + 1), linear between columns."""
+        if self.membrane_thickness is None:
+            return np.full(n_u, self.params.membrane_mm)
+        at = (np.arange(n_u) * AROUND / n_u + 1) % AROUND
+        return np.interp(at, np.arange(AROUND + 1), np.append(self.membrane_thickness, self.membrane_thickness[0]))
 
 
 def nurbs_surface(control: np.ndarray) -> NURBS.Surface:

@@ -12,9 +12,11 @@ from .nurbs import Cushion
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
 
 
-def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray, smoothing: float = NORMAL_SMOOTHING[0]) -> trimesh.Trimesh:
-    """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` to the
-    side away from the face (`face_normals_hint`: (n_u, 3) skin normals along the v=0 edge)."""
+def thicken(grid: np.ndarray, thickness_mm: float | np.ndarray, face_normals_hint: np.ndarray,
+            smoothing: float = NORMAL_SMOOTHING[0]) -> trimesh.Trimesh:
+    """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` (one, or
+    (n_u,) along u) to the side away from the face (`face_normals_hint`: (n_u, 3) skin normals along
+    the v=0 edge)."""
     n_u, n_v, _ = grid.shape
     sheet = trimesh.Trimesh(grid.reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
     normals = np.array(sheet.vertex_normals).reshape(n_u, n_v, 3)
@@ -22,7 +24,7 @@ def thicken(grid: np.ndarray, thickness_mm: float, face_normals_hint: np.ndarray
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)  # smoothed: the offset does not fold in tight bends
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
-    outer = grid + thickness_mm * normals
+    outer = grid + np.broadcast_to(thickness_mm, (n_u,))[:, None, None] * normals
     vertices = np.concatenate([grid.reshape(-1, 3), outer.reshape(-1, 3)])
     n = n_u * n_v
     sheet, rim, ring = sheet_faces(n_u, n_v), _cap(n_u, n_v, 0, n), _cap(n_u, n_v, n_v - 1, n)
@@ -71,50 +73,57 @@ def membrane_sheet(cushion: Cushion, n_u: int = 128, n_v: int = 8) -> trimesh.Tr
 def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 24) -> tuple[trimesh.Trimesh, float, int]:
     """(the printable wall, its thinnest wall in mm, its self-intersecting edges: 0 unless every
     smoothing folds): the NURBS surface sampled and `thickened` away from the face to the set wall."""
-    return thickened(cushion.grid(n_u, n_v), cushion.params.wall_mm, closed_resample(skin_normals, n_u))
+    solid, walls, folds = thickened(cushion.grid(n_u, n_v), np.full(n_u, cushion.params.wall_mm), closed_resample(skin_normals, n_u))
+    return solid, float(walls.min()), folds
 
 
-def thickened(grid: np.ndarray, target: float, hint: np.ndarray) -> tuple[trimesh.Trimesh, float, int]:
-    """(solid, thinnest wall mm, self-intersecting edges) of an (n_u, n_v, 3) sheet thickened to
-    `target` mm away from the face (`hint`: (n_u, 3) skin normals along its v=0 edge). Where the
-    sheet bends, an offset thins it on the inside of the bend, so the offset grows (at most twice)
-    until the thinnest wall reaches the target; where the offset folds into itself, the offset
-    directions are smoothed more (NORMAL_SMOOTHING)."""
+def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[trimesh.Trimesh, np.ndarray, int]:
+    """(solid, (n_u * n_v,) wall mm at each grid point, self-intersecting edges) of an (n_u, n_v, 3)
+    sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
+    along its v=0 edge). Where the sheet bends, an offset thins it on the inside of the bend, so the
+    offset grows (at most twice) until the thinnest wall against its target reaches it; where the
+    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
     n_u, n_v, _ = grid.shape
+    wanted = np.repeat(target, n_v)
     for smoothing in NORMAL_SMOOTHING:
         offset = target
         for _ in range(3):
             solid = thicken(grid, offset, hint, smoothing)
-            wall = thinnest_wall(grid, solid.vertices[n_u * n_v:])
-            if wall >= target:
+            walls = wall_thickness(grid, solid.vertices[n_u * n_v:])
+            share = float((walls / wanted).min())
+            if share >= 1.0:
                 break
-            offset *= 1.02 * target / max(wall, 0.25 * target)
+            offset = offset * 1.02 / max(share, 0.25)
         folds = self_intersecting_edges(solid)
         if folds == 0:
             break
-    return solid, wall, folds
+    return solid, walls, folds
 
 
-def thinnest_wall(grid: np.ndarray, outer: np.ndarray) -> float:
-    """Least distance (mm) from the outer sheet's points (offsets of the (n_u, n_v, 3) grid, in the
-    same order) to the inner sheet. A point whose nearest grid vertex is its own base point lies
-    over a smooth stretch, and its wall is its offset; the others (bends, folds) get the exact
+def wall_thickness(grid: np.ndarray, outer: np.ndarray) -> np.ndarray:
+    """(n_u * n_v,) mm: the distance from each outer sheet point (offsets of the (n_u, n_v, 3) grid,
+    in the same order) to the inner sheet. A point whose nearest grid vertex is its own base point
+    lies over a smooth stretch, and its wall is its offset; the others (bends, folds) get the exact
     closest point on the inner sheet."""
     n_u, n_v, _ = grid.shape
     base = grid.reshape(-1, 3)
-    near, idx = cKDTree(base).query(outer)
+    idx = cKDTree(base).query(outer)[1]
     suspect = idx != np.arange(len(base))
     walls = np.linalg.norm(outer - base, axis=1)
     if suspect.any():
         inner = trimesh.Trimesh(base, sheet_faces(n_u, n_v), process=False)
         _, walls[suspect], _ = trimesh.proximity.closest_point(inner, outer[suspect])
-    return float(walls.min())
+    return walls
 
 
-def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8) -> tuple[trimesh.Trimesh, float]:
-    """(the printable cushion, the membrane's thinnest wall in mm): the cushion's `wall` solid united
-    (manifold3d) with its membrane, the membrane's NURBS sheet `thickened` to `params.membrane_mm`
-    away from the face (`skin_normals`: (K, 3) along the seal curve). Its root lies inside the
-    flange, so the union joins them along the flange's inner edge."""
-    flap, thinnest, _ = thickened(cushion.membrane_grid(n_u, n_v), cushion.params.membrane_mm, closed_resample(skin_normals, n_u))
-    return to_trimesh(to_manifold(wall) + to_manifold(flap)), thinnest
+def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8
+                  ) -> tuple[trimesh.Trimesh, tuple[float, float]]:
+    """(the printable cushion, (the membrane's wall in mm, its set thickness in mm) where it is
+    thinnest against its set thickness): the cushion's `wall` solid united (manifold3d) with its
+    membrane, the membrane's NURBS sheet `thickened` to its thickness along the seal
+    (`Cushion.membrane_thickness_at`) away from the face (`skin_normals`: (K, 3) along the seal
+    curve). Its root lies inside the flange, so the union joins them along the flange's inner edge."""
+    target = cushion.membrane_thickness_at(n_u)
+    flap, walls, _ = thickened(cushion.membrane_grid(n_u, n_v), target, closed_resample(skin_normals, n_u))
+    worst = int(np.argmin(walls / np.repeat(target, n_v)))
+    return to_trimesh(to_manifold(wall) + to_manifold(flap)), (float(walls[worst]), float(target[worst // n_v]))

@@ -20,7 +20,7 @@ import trimesh
 
 from ..ict import ict_face, load_ict, random_subject, template_truth
 from ..template import load_template
-from .envelope import REACH_MM, flap_widths, with_flaps
+from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
 from .solid import cushion_solid
@@ -74,6 +74,6 @@ def stock_cushion(mask: str, size: str, params: CushionParams = CushionParams())
     skin = trimesh.Trimesh(scaled, load_template().faces, process=False)
     contact = contact_on(mask, skin)
     wall = cushion_solid(design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params), contact.normals)[0]
-    widths = flap_widths(np.full(AROUND, REACH_MM[0]), contact, params.membrane_mm)
+    widths = flap_widths({LOWEST_CPAP_KPA: np.full(AROUND, REACH_MM[0])}, contact, params.membrane_mm)
     cushion, solid, _ = with_flaps(contact, AXIS, UP, scaled[NOSE_TIP], params, None, widths, skin, wall)
     return cushion, solid

@@ -103,8 +103,14 @@ class CushionFit:
             "tilt_deg": np.degrees(np.arctan(self.pressed.tilt)).round(3).tolist(),
             "lifted_off": self.pressed.lifted,
             "membrane_sealed_fraction": float(((self.pressed.opening_mm > 0) & (self.opening_mm[c] == 0)).mean()),
-            "membrane_width_mm": np.percentile(self.rim.membrane_mm[c], [0, 50, 100]).round(3).tolist(),
+            "membrane_width_mm": _least_median_most(self.rim.membrane_mm[c]),
+            "membrane_thickness_mm": _least_median_most(self.rim.membrane_thickness_mm[c & (self.rim.membrane_mm > 0)]),
         }
+
+
+def _least_median_most(values: np.ndarray) -> list[float]:
+    """[least, median, most] of `values`, mm to the micrometre; zeros where there are none."""
+    return np.percentile(values, [0, 50, 100]).round(3).tolist() if len(values) else [0.0, 0.0, 0.0]
 
 
 def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float) -> Pressed:
