@@ -31,6 +31,7 @@ import numpy as np
 from cpapfit import __version__
 from cpapfit.cushion.nurbs import CushionParams
 from cpapfit.errors import CpapfitError
+from cpapfit.cushion.envelope import THINNEST_MM
 from cpapfit.cushion.nurbs import MEMBRANE_LIFT, MEMBRANE_ROOT_MM
 from cpapfit.evaluation.calibration import sealed_opening, section_stiffness, strip_stiffness
 from cpapfit.evaluation.fe_membrane import Flap, NotConverged
@@ -85,7 +86,8 @@ def sealed_or_none(flap: Flap, cpap_kpa: float, spring: float | None = None) -> 
 
 
 def membrane_table(widths: tuple[float, ...], thickness: float = FLAP_MM) -> None:
-    """The membrane's sealed opening by finite elements beside the fast model's reach (module docstring)."""
+    """The membrane's sealed opening by finite elements beside the fast model's reach (module docstring),
+    for flaps `widths` mm wide and `thickness` mm thick."""
     soft = min(REGIONS.values(), key=lambda r: r[2])
     rigidity = bending_stiffness(thickness)
     print(f"membrane {thickness:g} mm silicone (E 1 MPa, nu 0.49), mesh {FLAP_CELLS[0]} x {FLAP_CELLS[1]} quadratic triangles, "
@@ -114,7 +116,7 @@ def main() -> None:
     ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped")
     ap.add_argument("--membrane", action="store_true", help="the membrane's sealed opening instead")
     ap.add_argument("--widths", type=float, nargs="+", default=FLAP_WIDTHS_MM, help="the membrane's widths, mm")
-    ap.add_argument("--thickness", type=float, default=FLAP_MM, help="the membrane's thickness, mm (the design's thinnest: 0.3)")
+    ap.add_argument("--thickness", type=float, default=FLAP_MM, help=f"the membrane's thickness, mm (the design's thinnest: {THINNEST_MM:g})")
     args = ap.parse_args()
     source = None if str(args.model) == "shipped" else Path(args.model).resolve()
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}")

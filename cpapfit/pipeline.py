@@ -262,8 +262,8 @@ def assessed(scan: Scan, mask: str, placement: Placement, params: CushionParams 
 
 def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float], membrane: tuple[float, float], name: str,
              landmarks_path: str) -> dict:
-    """`check_solid` of a custom cushion (`wall`, `membrane`: measured and set thickness, mm, where
-    thinnest against the set). A cushion crossing itself is refused with its cause: its wall's surface crossing itself (a
+    """`check_solid` of a custom cushion (`wall`: thinnest measured and set thickness, mm; `membrane`:
+    thinnest measured mm and least share of its set thickness). A cushion crossing itself is refused with its cause: its wall's surface crossing itself (a
     twisted seal curve, which a well-placed template does not carry: the refusal says what to do),
     its membrane's surface crossing itself, or, both clean, its solid folding where a surface bends
     tighter than it is thick."""
@@ -279,9 +279,15 @@ def _checked(cushion: Cushion, solid: trimesh.Trimesh, wall: tuple[float, float]
         elif cushion.membrane is not None and self_intersecting_edges(membrane_sheet(cushion)):
             cause = "its membrane's flaps run into each other where the seal bends tightly inwards, a shape of this face it cannot follow"
         else:
-            cause = (f"its surface does not, but its {wall[1]:g} mm wall or {membrane[1]:g} mm membrane folds where the "
+            cause = (f"its surface does not, but its {wall[1]:g} mm wall or {_thicknesses(cushion)} mm membrane folds where the "
                      "surface bends tighter than that, a shape of this face the cushion cannot follow")
         raise SolidError(f"{name} would cross itself ({crossings} self-intersecting edges): {cause}; nothing was written") from None
+
+
+def _thicknesses(cushion: Cushion) -> str:
+    """The membrane's set thickness (mm) as words: one figure, or its least and most."""
+    t = cushion.membrane_thickness_at()
+    return f"{t.min():.2g}-{t.max():.2g}" if np.ptp(t) > 0 else f"{t[0]:g}"
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray | None = None) -> Face:

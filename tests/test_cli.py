@@ -128,7 +128,7 @@ def test_a_cushion_failing_the_printability_checks_writes_nothing(cli, tmp_path,
     def demanding(mesh, wall, set_wall, name, membrane):
         if thicker == "wall":
             return check_solid(mesh, wall, 2 * wall, name, membrane)
-        return check_solid(mesh, wall, set_wall, name, (membrane[0], 2 * membrane[0]))
+        return check_solid(mesh, wall, set_wall, name, (membrane[0], membrane[1] / 2))
 
     monkeypatch.setattr(pipeline, "check_solid", demanding)
     out = tmp_path / "out"

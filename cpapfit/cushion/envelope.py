@@ -14,7 +14,7 @@ most INWARD_SHARE of the width at which it and its neighbours would meet (where 
 bends tightly inwards, beside a nostril, the flaps fan out across the bend, `flap_directions`, but
 still run together). Wherever the membrane's sheet still turns back on itself or closes up across
 the seal (`twisted_columns`), those columns narrow by SHRINK, and the whole membrane while its
-solid would cross itself. Where a flap so narrowed no longer reaches its need, its sheet is
+solid would cross itself. Where a flap so narrowed falls short of its need, its sheet is
 thinner, down to THINNEST_MM (`flap_thickness`): the reach grows as the cube of the thickness
 falls, so a flap that cannot widen still closes the opening.
 """
@@ -42,7 +42,7 @@ WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the
 INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
 SHRINK, SHRINKS = 0.75, 6
 THINNEST_MM = 0.3  # the thinnest membrane: the reach law holds to the finite elements within 0.15 mm down to it (section 15)
-THICKNESS_STEPS = 20  # bisection steps for a flap's thickness: to 0.2 um
+THICKNESS_STEPS = 10  # bisection steps for a flap's thickness: to 0.2 um
 PEAK_MARGIN_KPA = 0.4  # the headgear force stops where the awake peak comes this far under capillary closing (the prediction's doubt)
 CLOSING = 1.0 - INWARD_SHARE  # a sheet row closes up where its step around is under this share of its root's
 LOWEST_CPAP_KPA = CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O
@@ -97,11 +97,11 @@ def flap_thickness(need: dict[float, np.ndarray], widths: np.ndarray, thickness_
     """(AROUND,) mm: at each control column the thickest membrane, from THINNEST_MM to
     `thickness_mm`, whose flap `widths` (AROUND,) mm wide reaches `need` {CPAP kPa: (AROUND,) mm}
     at each of those pressures (bisection: the reach falls as the sheet thickens); THINNEST_MM
-    where none does."""
+    where none does (`thickness_mm` where that is thinner still)."""
     def reaches(thickness: np.ndarray) -> np.ndarray:
         return np.all([reach_mm(widths, thickness, kpa) >= reach for kpa, reach in need.items()], axis=0)
 
-    lo, hi = np.full(len(widths), THINNEST_MM), np.full(len(widths), float(thickness_mm))
+    lo, hi = np.full(len(widths), min(THINNEST_MM, thickness_mm)), np.full(len(widths), float(thickness_mm))
     for _ in range(THICKNESS_STEPS):
         mid = 0.5 * (lo + hi)
         ok = reaches(mid)
@@ -122,8 +122,9 @@ def converging(roots: np.ndarray, directions: np.ndarray) -> np.ndarray:
 def enveloped_cushion(
     contact: Contact, face: Face, warped: np.ndarray, cushion: Cushion, preload_mm: np.ndarray, wall: trimesh.Trimesh,
     fit_params: FitParams, awake: CushionFit, faces: dict[FaceState, Face] | None = None,
-) -> tuple[Cushion, trimesh.Trimesh, float]:
-    """(the cushion with its membrane, its printable solid, the membrane's thinnest wall mm): the
+) -> tuple[Cushion, trimesh.Trimesh, tuple[float, float]]:
+    """(the cushion with its membrane, its printable solid, (the membrane's thinnest wall mm, the
+    least share of its set thickness)): the
     `cushion` (its `wall` solid pressed onto the face as `awake`, at the force the states keep)
     given the membrane the predicted states need (`with_flaps`). `faces`: the face in each sleep
     state where already made (`state_faces`)."""
@@ -139,8 +140,8 @@ def with_flaps(
     contact: Contact, axis: np.ndarray, up: np.ndarray, nose_tip: np.ndarray, params: CushionParams, preload_mm: np.ndarray | None,
     widths: np.ndarray, skin: trimesh.Trimesh, wall: trimesh.Trimesh, need: dict[float, np.ndarray] | None = None,
 ) -> tuple[Cushion, trimesh.Trimesh, tuple[float, float]]:
-    """(the cushion with its membrane, its printable solid, (the membrane's wall, its set thickness)
-    mm where thinnest against it): the design (`design_cushion` of these arguments) given flaps of
+    """(the cushion with its membrane, its printable solid, (the membrane's thinnest wall mm, the
+    least share of its set thickness, `with_membrane`)): the design (`design_cushion` of these arguments) given flaps of
     `widths` (AROUND,) mm, its `wall` solid joined to them; narrowed where the membrane's sheet would
     twist (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
     SHRINKS times each. `need` {CPAP kPa: (AROUND,) mm}: the reach each column's flap must have at

@@ -79,8 +79,8 @@ class Cushion:
         return surface_grid(self.membrane, n_u, n_v)
 
     def membrane_thickness_at(self, n_u: int = 128) -> np.ndarray:
-        """(n_u,) mm: the membrane's thickness at the n_u points around the seal of `membrane_grid`
-        (its k-th on the seal point of control column k AROUND / n_u + 1), linear between columns."""
+        """(n_u,) mm: the membrane's thickness at the n_u points around the seal of `membrane_grid`,
+        linear between control columns (its k-th point lies on column k AROUND / n_u + 1, mod AROUND)."""
         if self.membrane_thickness is None:
             return np.full(n_u, self.params.membrane_mm)
         at = (np.arange(n_u) * AROUND / n_u + 1) % AROUND

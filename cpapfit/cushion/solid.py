@@ -81,8 +81,10 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
     """(solid, (n_u * n_v,) wall mm at each grid point, self-intersecting edges) of an (n_u, n_v, 3)
     sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
     along its v=0 edge). Where the sheet bends, an offset thins it on the inside of the bend, so the
-    offset grows (at most twice) until the thinnest wall against its target reaches it; where the
-    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
+    offset grows (at most twice) until the thinnest wall against its target reaches it: a sheet of
+    one thickness as one, one whose thickness varies column by column (u), so that a thinner
+    column keeps its thickness; where the offset folds into itself, the offset directions are
+    smoothed more (NORMAL_SMOOTHING)."""
     n_u, n_v, _ = grid.shape
     wanted = np.repeat(target, n_v)
     for smoothing in NORMAL_SMOOTHING:
@@ -90,10 +92,12 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
         for _ in range(3):
             solid = thicken(grid, offset, hint, smoothing)
             walls = wall_thickness(grid, solid.vertices[n_u * n_v:])
-            share = float((walls / wanted).min())
-            if share >= 1.0:
+            share = (walls / wanted).reshape(n_u, n_v).min(axis=1)  # (n_u,) each column's least share of its target
+            if share.min() >= 1.0:
                 break
-            offset = offset * 1.02 / max(share, 0.25)
+            if np.ptp(target) == 0:
+                share = np.full(n_u, share.min())
+            offset = offset * np.where(share < 1.0, 1.02 / np.maximum(share, 0.25), 1.0)
         folds = self_intersecting_edges(solid)
         if folds == 0:
             break
@@ -118,12 +122,11 @@ def wall_thickness(grid: np.ndarray, outer: np.ndarray) -> np.ndarray:
 
 def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8
                   ) -> tuple[trimesh.Trimesh, tuple[float, float]]:
-    """(the printable cushion, (the membrane's wall in mm, its set thickness in mm) where it is
-    thinnest against its set thickness): the cushion's `wall` solid united (manifold3d) with its
-    membrane, the membrane's NURBS sheet `thickened` to its thickness along the seal
+    """(the printable cushion, (the membrane's thinnest wall mm, the least share of its set
+    thickness it has anywhere)): the cushion's `wall` solid united (manifold3d) with its membrane,
+    the membrane's NURBS sheet `thickened` to its thickness along the seal
     (`Cushion.membrane_thickness_at`) away from the face (`skin_normals`: (K, 3) along the seal
     curve). Its root lies inside the flange, so the union joins them along the flange's inner edge."""
     target = cushion.membrane_thickness_at(n_u)
     flap, walls, _ = thickened(cushion.membrane_grid(n_u, n_v), target, closed_resample(skin_normals, n_u))
-    worst = int(np.argmin(walls / np.repeat(target, n_v)))
-    return to_trimesh(to_manifold(wall) + to_manifold(flap)), (float(walls[worst]), float(target[worst // n_v]))
+    return to_trimesh(to_manifold(wall) + to_manifold(flap)), (float(walls.min()), float((walls / np.repeat(target, n_v)).min()))

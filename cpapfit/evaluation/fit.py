@@ -109,7 +109,7 @@ class CushionFit:
 
 
 def _least_median_most(values: np.ndarray) -> list[float]:
-    """[least, median, most] of `values`, mm to the micrometre; zeros where there are none."""
+    """[least, median, most] of (N,) `values` mm, to the micrometre; zeros where N is 0."""
     return np.percentile(values, [0, 50, 100]).round(3).tolist() if len(values) else [0.0, 0.0, 0.0]
 
 
