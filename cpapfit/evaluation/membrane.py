@@ -17,7 +17,8 @@ reach is
     d (1 - LARGE d / a) - LIFT a / 3 - ROOT_MM,
 at least 0 and at most w - BAND_MM (an inextensible flap hanging to the skin): within 0.11 mm of
 the finite elements for 0.5 mm flaps 3-10 mm wide at 4-20 cmH2O (LARGE = 0.22 fitted to them; a
-10 mm flap at 20 cmH2O hangs to the skin, where they do not converge). A 5 mm flap at 10 cmH2O
+10 mm flap at 20 cmH2O hangs to the skin, where they do not converge), within 0.15 mm for 0.3 mm
+flaps 3-8 mm wide where they converge. A 5 mm flap at 10 cmH2O
 closes nothing; a 10 mm one 4.1 mm. Where the wall is pushed off the face altogether (the CPAP load
 beats the headgear), nothing holds.
 
