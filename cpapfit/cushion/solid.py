@@ -12,11 +12,11 @@ from .nurbs import Cushion
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
 
 
-def thicken(grid: np.ndarray, thickness_mm: float | np.ndarray, face_normals_hint: np.ndarray,
+def thicken(grid: np.ndarray, thickness_mm: np.ndarray, face_normals_hint: np.ndarray,
             smoothing: float = NORMAL_SMOOTHING[0]) -> trimesh.Trimesh:
-    """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` (one, or
-    (n_u,) along u) to the side away from the face (`face_normals_hint`: (n_u, 3) skin normals along
-    the v=0 edge)."""
+    """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` (n_u,)
+    along u to the side away from the face (`face_normals_hint`: (n_u, 3) skin normals along the
+    v=0 edge)."""
     n_u, n_v, _ = grid.shape
     sheet = trimesh.Trimesh(grid.reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
     normals = np.array(sheet.vertex_normals).reshape(n_u, n_v, 3)
@@ -24,7 +24,7 @@ def thicken(grid: np.ndarray, thickness_mm: float | np.ndarray, face_normals_hin
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)  # smoothed: the offset does not fold in tight bends
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
-    outer = grid + np.broadcast_to(thickness_mm, (n_u,))[:, None, None] * normals
+    outer = grid + thickness_mm[:, None, None] * normals
     vertices = np.concatenate([grid.reshape(-1, 3), outer.reshape(-1, 3)])
     n = n_u * n_v
     sheet, rim, ring = sheet_faces(n_u, n_v), _cap(n_u, n_v, 0, n), _cap(n_u, n_v, n_v - 1, n)
