@@ -186,3 +186,20 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
         assert np.median(thick[flap & np.isin(column, half)]) == pytest.approx(mm, abs=0.02)
     edges = [np.median(thick[flap & (column == c)]) for c in (0, AROUND // 2 - 1, AROUND // 2, AROUND - 1)]
     assert max(edges[0], edges[1]) < 0.4 < min(edges[2], edges[3])  # each column as set, not its neighbour's
+
+
+def test_a_sheet_closing_up_narrows_the_columns_around_where_it_closes():
+    """A flat annular sheet whose rows close up between grid rows 13 and 14 of 128 (at column
+    13 AROUND / 128 + 1, `Cushion.membrane_thickness_at`): the four columns flagged are centred
+    there (within half a column), and none elsewhere."""
+    from cpapfit.cushion.envelope import twisted_columns
+    from cpapfit.cushion.nurbs import AROUND
+
+    n_u, k0 = 128, 13
+    angle = 2 * np.pi * np.arange(n_u) / n_u
+    radius = np.array([30.0, 27.0, 24.0])
+    grid = np.stack([np.outer(np.cos(angle), radius), np.outer(np.sin(angle), radius), np.zeros((n_u, 3))], axis=-1)
+    assert not twisted_columns(grid).any()
+    grid[k0 + 1, 1:] = grid[k0, 1:] + 0.01 * (grid[k0 + 1, 1:] - grid[k0, 1:])  # the inner rows stop moving around there
+    flagged = np.flatnonzero(twisted_columns(grid))
+    assert len(flagged) == 4 and abs(flagged.mean() - (k0 * AROUND / n_u + 1)) <= 0.5

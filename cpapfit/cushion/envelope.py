@@ -175,6 +175,6 @@ def twisted_columns(grid: np.ndarray) -> np.ndarray:
     along = np.einsum("uvc,uvc->uv", step, np.broadcast_to(root, step.shape)) / np.maximum(np.einsum("uvc,uvc->uv", root, root), 1e-12)
     bad = np.flatnonzero((along[:, 1:] < CLOSING).any(axis=1))
     columns = np.zeros(AROUND, dtype=bool)
-    for near in (-1, 0, 1, 2):
+    for near in (0, 1, 2, 3):  # grid row k lies between columns k AROUND / n_u + 1 and + 2 (`Cushion.membrane_thickness_at`)
         columns[(bad * AROUND // len(grid) + near) % AROUND] = True
     return columns
