@@ -22,6 +22,7 @@ from cpapfit.ict import load_ict
 from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.pipeline import face_for, place_template
+from cpapfit.cushion.stock import SIZE_PERCENTILES, gauge_mm, population_gauge
 from cpapfit.stock_fit import COMFORT_N, compared_stock
 from cpapfit.template import MASKS
 from ict_bench import ict_arguments, model_source, scan_of
@@ -56,7 +57,9 @@ def run(job: tuple[str, str, Path | None]) -> list[dict]:
                         **{k: f.fit.summary()[k] for k in ("leak_l_min", "pressure_max_kpa", "pressure_max_region",
                                                            "window_fraction", "rim_covered_fraction")}}
                  for size, f in fits.items()}
-        rows.append({"face": name, "mask": mask, "outcome": "fitted", "gauge": compared.gauge,
+        measure = gauge_mm(mask, np.asarray(face.registered.vertices))
+        rows.append({"face": name, "mask": mask, "outcome": "fitted", "gauge": compared.gauge, "gauge_mm": measure,
+                     "gauge_percentile": 100.0 * float(np.mean(population_gauge(mask) < measure)),
                      "best": next(iter(fits)), "sizes": sizes, "seconds": time.perf_counter() - t0})
     return rows
 
@@ -72,15 +75,17 @@ def seals(row: dict, size: str) -> bool:
 
 def table(rows: list[dict]) -> str:
     """Markdown: per face and mask, the gauge's and the best size and each one's numbers."""
-    out = ["| face | mask | gauge | best | best: force (N) | leak (L/min) | peak (kPa) | window | covered | gauge's size: leak | peak | seals (best / gauge) |",
-           "|---" * 12 + "|"]
+    out = ["| face | mask | gauge measure (mm, population percentile) | gauge | best | best: force (N) | leak (L/min) | peak (kPa) | where "
+           "| window | covered | gauge's size: leak | peak | seals (best / gauge) |",
+           "|---" * 14 + "|"]
     for r in rows:
         if r["outcome"] != "fitted":
-            out.append(f"| {r['face']} | {r['mask']} | refused: {r['reason'][:80]} |" + " |" * 10)
+            out.append(f"| {r['face']} | {r['mask']} | refused: {r['reason'][:80]} |" + " |" * 12)
             continue
         b, g = r["sizes"][r["best"]], r["sizes"].get(r["gauge"], NOT_SEATED)
-        out.append(f"| {r['face']} | {r['mask']} | {r['gauge']} | {r['best']} | {b['force_n']:.1f} | {b['leak_l_min']:.1f} "
-                   f"| {b['pressure_max_kpa']:.2f} | {100 * b['window_fraction']:.0f} % | {100 * b['rim_covered_fraction']:.0f} % "
+        out.append(f"| {r['face']} | {r['mask']} | {r['gauge_mm']:.1f} ({r['gauge_percentile']:.0f}) | {r['gauge']} | {r['best']} "
+                   f"| {b['force_n']:.1f} | {b['leak_l_min']:.1f} | {b['pressure_max_kpa']:.2f} | {b['pressure_max_region']} "
+                   f"| {100 * b['window_fraction']:.0f} % | {100 * b['rim_covered_fraction']:.0f} % "
                    f"| {g['leak_l_min']:.1f} | {g['pressure_max_kpa']:.2f} | {'yes' if seals(r, r['best']) else 'no'} / "
                    f"{'yes' if seals(r, r['gauge']) else 'no'} |")
     return "\n".join(out)
@@ -97,6 +102,10 @@ def summary(rows: list[dict]) -> str:
             agree = np.mean([r["gauge"] == r["best"] for r in got])
             out.append(f"{mask}: best size seals on {100 * best:.0f} % of {len(got)}, the gauge's on {100 * gauge:.0f} %, "
                        f"gauge = best on {100 * agree:.0f} %")
+            out += [f"  not sealed: {r['face']}, gauge measure at the population's {r['gauge_percentile']:.0f}th percentile "
+                    f"(sizes S-L at the {SIZE_PERCENTILES['S']:g}th-{SIZE_PERCENTILES['L']:g}th), "
+                    f"peak {r['sizes'][r['best']]['pressure_max_kpa']:.2f} kPa on the {r['sizes'][r['best']]['pressure_max_region']}"
+                    for r in got if not seals(r, r["best"])]
     return "\n".join(out)
 
 
