@@ -80,7 +80,7 @@ def table(rows: list[dict]) -> str:
            "|---" * 14 + "|"]
     for r in rows:
         if r["outcome"] != "fitted":
-            out.append(f"| {r['face']} | {r['mask']} | refused: {r['reason'][:80]} |" + " |" * 12)
+            out.append(f"| {r['face']} | {r['mask']} | refused: {r['reason'][:80]} |" + " |" * 11)
             continue
         b, g = r["sizes"][r["best"]], r["sizes"].get(r["gauge"], NOT_SEATED)
         out.append(f"| {r['face']} | {r['mask']} | {r['gauge_mm']:.1f} ({r['gauge_percentile']:.0f}) | {r['gauge']} | {r['best']} "
@@ -102,8 +102,8 @@ def summary(rows: list[dict]) -> str:
             agree = np.mean([r["gauge"] == r["best"] for r in got])
             out.append(f"{mask}: best size seals on {100 * best:.0f} % of {len(got)}, the gauge's on {100 * gauge:.0f} %, "
                        f"gauge = best on {100 * agree:.0f} %")
-            out += [f"  not sealed: {r['face']}, gauge measure at the population's {r['gauge_percentile']:.0f}th percentile "
-                    f"(sizes S-L at the {SIZE_PERCENTILES['S']:g}th-{SIZE_PERCENTILES['L']:g}th), "
+            out += [f"  not sealed: {r['face']}, gauge measure at percentile {r['gauge_percentile']:.0f} of the population "
+                    f"(sizes S-L at {SIZE_PERCENTILES['S']:g}-{SIZE_PERCENTILES['L']:g}), "
                     f"peak {r['sizes'][r['best']]['pressure_max_kpa']:.2f} kPa on the {r['sizes'][r['best']]['pressure_max_region']}"
                     for r in got if not seals(r, r["best"])]
     return "\n".join(out)
