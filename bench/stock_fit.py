@@ -104,7 +104,7 @@ def summary(rows: list[dict]) -> str:
                        f"gauge = best on {100 * agree:.0f} %")
             out += [f"  not sealed: {r['face']}, gauge measure at percentile {r['gauge_percentile']:.0f} of the population "
                     f"(sizes S-L at {SIZE_PERCENTILES['S']:g}-{SIZE_PERCENTILES['L']:g}), "
-                    f"peak {r['sizes'][r['best']]['pressure_max_kpa']:.2f} kPa on the {r['sizes'][r['best']]['pressure_max_region']}"
+                    f"peak {r['sizes'][r['best']]['pressure_max_kpa']:.2f} kPa ({r['sizes'][r['best']]['pressure_max_region']})"
                     for r in got if not seals(r, r["best"])]
     return "\n".join(out)
 
