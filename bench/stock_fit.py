@@ -1,7 +1,9 @@
 """Stock cushions fitted as a clinic fits them (`cpapfit.stock_fit`), awake, on ICT Face Model subjects
 (drawn from the full model, `--model`) and the shared real scans (`--real`): each face placed as
 `design` places it, then every stock size of each mask seated at its best; per face and mask the
-gauge's size, the best size by fit, and each size's force, leak, peak pressure and window.
+gauge's measure (and its percentile among the faces the sizes are made from), the gauge's size, the
+best size by fit, and each size's force, leak, peak pressure (and where) and window; then, for each
+face whose best size does not seal, its measure against the sizes' span and where it presses.
 
 Usage: .venv/bin/python bench/stock_fit.py [--seeds 30] [--first 8000] [--workers 2] [--rows rows.jsonl]
        [--model NPZ | --model shipped] [--real]

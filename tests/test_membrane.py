@@ -188,18 +188,20 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
     assert max(edges[0], edges[1]) < 0.4 < min(edges[2], edges[3])  # each column as set, not its neighbour's
 
 
-def test_a_sheet_closing_up_narrows_the_columns_around_where_it_closes():
-    """A flat annular sheet whose rows close up between grid rows 13 and 14 of 128 (at column
-    13 AROUND / 128 + 1, `Cushion.membrane_thickness_at`): the four columns flagged are centred
-    there (within half a column), and none elsewhere."""
+@pytest.mark.parametrize("k0", [12, 13, 127])
+def test_a_sheet_closing_up_narrows_the_columns_that_shape_where_it_closes(k0):
+    """A flat annular sheet whose rows close up between grid rows k0 and k0 + 1 of 128: that step
+    lies between columns j + 1 and j + 2 (j = k0 AROUND // 128, `Cushion.membrane_thickness_at`),
+    so the cubic's columns j..j + 3 are flagged (around the seal's end too), and none elsewhere."""
     from cpapfit.cushion.envelope import twisted_columns
     from cpapfit.cushion.nurbs import AROUND
 
-    n_u, k0 = 128, 13
+    n_u = 128
     angle = 2 * np.pi * np.arange(n_u) / n_u
     radius = np.array([30.0, 27.0, 24.0])
     grid = np.stack([np.outer(np.cos(angle), radius), np.outer(np.sin(angle), radius), np.zeros((n_u, 3))], axis=-1)
     assert not twisted_columns(grid).any()
-    grid[k0 + 1, 1:] = grid[k0, 1:] + 0.01 * (grid[k0 + 1, 1:] - grid[k0, 1:])  # the inner rows stop moving around there
-    flagged = np.flatnonzero(twisted_columns(grid))
-    assert len(flagged) == 4 and abs(flagged.mean() - (k0 * AROUND / n_u + 1)) <= 0.5
+    after = (k0 + 1) % n_u
+    grid[after, 1:] = grid[k0, 1:] + 0.01 * (grid[after, 1:] - grid[k0, 1:])  # the inner rows stop moving around there
+    j = k0 * AROUND // n_u
+    assert set(np.flatnonzero(twisted_columns(grid))) == {(j + d) % AROUND for d in range(4)}

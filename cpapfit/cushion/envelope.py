@@ -175,6 +175,8 @@ def twisted_columns(grid: np.ndarray) -> np.ndarray:
     along = np.einsum("uvc,uvc->uv", step, np.broadcast_to(root, step.shape)) / np.maximum(np.einsum("uvc,uvc->uv", root, root), 1e-12)
     bad = np.flatnonzero((along[:, 1:] < CLOSING).any(axis=1))
     columns = np.zeros(AROUND, dtype=bool)
-    for near in (0, 1, 2, 3):  # grid row k lies between columns k AROUND / n_u + 1 and + 2 (`Cushion.membrane_thickness_at`)
+    # grid row k lies at column k AROUND / n_u + 1 (`Cushion.membrane_thickness_at`), in the span
+    # between columns j + 1 and j + 2 (j = k AROUND // n_u) that the cubic's columns j..j + 3 shape
+    for near in (0, 1, 2, 3):
         columns[(bad * AROUND // len(grid) + near) % AROUND] = True
     return columns
