@@ -1,7 +1,11 @@
 """Stock cushions: a family of sizes made for no one patient.
 
 Each mask's cushion is the design on the ICT Face Model's mean face (its neutral, carried onto the
-template), with no pre-load (a stock cushion is compensated for no one) and a self-sealing membrane,
+template), compensated for no one face but set back for the population: at each seal point its rim
+stands back along the mask axis by how far the SET_BACK_PERCENTILE-th of POPULATION faces stands out
+there against the mean face (each face seated on the nasal bridge and pressed to its own rim's
+mean depth; less the least set back round the rim), so that the wall clears most faces' high points
+(the nasal bridge most) and the membrane closes the rest; and a self-sealing membrane,
 as stock silicone cushions have, sized by the custom cushion's rule for its awake slack: every
 flap reaches REACH_MM[0] at the lowest CPAP pressure (`envelope.flap_widths`, narrowed where its
 sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The flap is
@@ -21,12 +25,14 @@ import trimesh
 from ..ict import ict_face, load_ict, random_subject, template_truth
 from ..template import load_template
 from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
+from .contact import template_curve
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
 from .solid import cushion_solid
 
 POPULATION = 200
 SIZE_PERCENTILES = {"S": 15.0, "M": 50.0, "L": 85.0}
+SET_BACK_PERCENTILE = 85.0
 GAUGE = {"nasal": (129, 358), "oronasal": (168, 18)}  # template landmarks the gauge measures between
 BRIDGE = 168
 SIZES = {"nasal": ("S", "M", "L", "W"), "oronasal": ("S", "M", "L")}
@@ -46,10 +52,34 @@ def gauge_mm(mask: str, vertices: np.ndarray) -> float:
 
 
 @lru_cache(maxsize=2)
-def population_gauge(mask: str) -> np.ndarray:
-    """(POPULATION,) mm: the gauge's measure over faces drawn from the shipped ICT model (seed 0)."""
+def population(mask: str) -> tuple[np.ndarray, np.ndarray]:
+    """((POPULATION,) mm the gauge's measure, (POPULATION, K) mm each seal-curve point's depth along
+    the mask axis from the nasal bridge) over faces drawn from the shipped ICT model (seed 0)."""
     rng = np.random.default_rng(0)
-    return np.array([gauge_mm(mask, template_truth(random_subject(rng, 0.0)[0])) for _ in range(POPULATION)])
+    faces = [template_truth(random_subject(rng, 0.0)[0]) for _ in range(POPULATION)]
+    return np.array([gauge_mm(mask, v) for v in faces]), np.array([_seal_depth(mask, v) for v in faces])
+
+
+def population_gauge(mask: str) -> np.ndarray:
+    """(POPULATION,) mm: the gauge's measure over the population's faces (`population`)."""
+    return population(mask)[0]
+
+
+@lru_cache(maxsize=2)
+def set_back(mask: str) -> np.ndarray:
+    """(K,) mm per seal-curve point: how far a stock rim stands back along the mask axis from the
+    mean face (module docstring)."""
+    depth = population(mask)[1] - _seal_depth(mask, mean_face())
+    standing_out = np.percentile(depth - depth.mean(axis=1, keepdims=True), SET_BACK_PERCENTILE, axis=0)
+    return standing_out - standing_out.min()
+
+
+def _seal_depth(mask: str, vertices: np.ndarray) -> np.ndarray:
+    """(K,) mm: the template seal curve's points on a face of template vertices (N, 3) mm, along
+    the mask axis from its nasal bridge."""
+    tri, bary = template_curve(mask)
+    curve = np.einsum("kj,kjc->kc", bary, vertices[load_template().faces[tri]])
+    return (curve - vertices[BRIDGE]) @ AXIS
 
 
 def size_scale(mask: str, size: str) -> np.ndarray:
@@ -73,7 +103,8 @@ def stock_cushion(mask: str, size: str, params: CushionParams = CushionParams())
     scaled = (face - bridge) * scale + bridge
     skin = trimesh.Trimesh(scaled, load_template().faces, process=False)
     contact = contact_on(mask, skin)
-    wall = cushion_solid(design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params), contact.normals)[0]
+    back = -set_back(mask) * scale[2]  # a pre-load out of the skin
+    wall = cushion_solid(design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params, back), contact.normals)[0]
     widths = flap_widths({LOWEST_CPAP_KPA: np.full(AROUND, REACH_MM[0])}, contact, params.membrane_mm)
-    cushion, solid, _ = with_flaps(contact, AXIS, UP, scaled[NOSE_TIP], params, None, widths, skin, wall)
+    cushion, solid, _ = with_flaps(contact, AXIS, UP, scaled[NOSE_TIP], params, back, widths, skin, wall)
     return cushion, solid
