@@ -4,7 +4,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, size_scale, stock_cushion
+from scipy.spatial import cKDTree
+
+from cpapfit.cushion.generic import AXIS, NOSE_TIP, UP, contact_on
+from cpapfit.cushion.nurbs import design_cushion
+from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, population_gauge, set_back, size_scale, stock_cushion
 from cpapfit.cushion.envelope import REACH_MM
 from cpapfit.evaluation.fit import KPA_PER_CMH2O, Face
 from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm, reach_mm
@@ -33,6 +37,20 @@ def test_the_sizes_span_the_populations_gauge_measure(mask):
         assert size_scale(mask, size)[0] == pytest.approx(expected, rel=1e-12)
         assert width[size] / width["M"] == pytest.approx(expected, rel=0.015)
     assert 0.8 < size_scale(mask, "S")[0] < 0.97 and 1.03 < size_scale(mask, "L")[0] < 1.2
+
+
+@pytest.mark.parametrize("mask", ["nasal", "oronasal"])
+def test_a_stock_rim_stands_back_where_the_population_stands_out(mask):
+    """The set back is none somewhere round the seal and most at the nasal bridge, where faces
+    differ most in depth (1-4 mm); the M cushion's seal row stands that far back along the axis
+    from the same design on the mean face without it (within 0.25 mm at every point)."""
+    back = set_back(mask)
+    contact = contact_on(mask, face_scaled(np.ones(3)).scan)
+    bridge = np.argmin(np.linalg.norm(contact.curve - mean_face()[BRIDGE], axis=1))
+    assert back.min() == 0.0 and 1.0 < back.max() < 4.0 and back[bridge] > back.max() - 0.3
+    plain = design_cushion(contact, AXIS, UP, mean_face()[NOSE_TIP]).grid()[:, 0]
+    stood_back = (stock_cushion(mask, "M")[0].grid()[:, 0] - plain) @ AXIS
+    assert np.abs(stood_back - back[cKDTree(contact.curve).query(plain)[1]]).max() < 0.25
 
 
 def test_a_stock_cushion_is_a_closed_wall_with_a_thin_membrane():
