@@ -11,3 +11,9 @@ def freeze_arrays(obj) -> None:
         value = getattr(obj, field.name)
         if isinstance(value, np.ndarray):
             value.flags.writeable = False
+
+
+def read_only(array: np.ndarray) -> np.ndarray:
+    """`array`, made read-only (for a cached result shared by its callers)."""
+    array.flags.writeable = False
+    return array

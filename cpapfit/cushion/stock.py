@@ -1,11 +1,12 @@
 """Stock cushions: a family of sizes made for no one patient.
 
 Each mask's cushion is the design on the ICT Face Model's mean face (its neutral, carried onto the
-template), compensated for no one face but set back for the population: at each seal point its rim
-stands back along the mask axis by how far the SET_BACK_PERCENTILE-th of POPULATION faces stands out
-there against the mean face (each face seated on the nasal bridge and pressed to its own rim's
-mean depth; less the least set back round the rim), so that the wall clears most faces' high points
-(the nasal bridge most) and the membrane closes the rest; and a self-sealing membrane,
+template), compensated for no one face but set back for the population: at each of the K seal-curve
+points (`contact.SAMPLES`) its rim stands back along the mask axis by how far the
+SET_BACK_PERCENTILE-th of POPULATION faces stands out there against the mean face (each face's
+depth taken from its own mean depth round the seal, where a mask settles; less the least set back
+round the rim), so that the wall clears most faces' high points (the nasal bridge most) and the
+membrane closes the rest; and a self-sealing membrane,
 as stock silicone cushions have, sized by the custom cushion's rule for its awake slack: every
 flap reaches REACH_MM[0] at the lowest CPAP pressure (`envelope.flap_widths`, narrowed where its
 sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The flap is
@@ -22,10 +23,11 @@ from functools import lru_cache
 import numpy as np
 import trimesh
 
+from ..frozen import read_only
 from ..ict import ict_face, load_ict, random_subject, template_truth
 from ..template import load_template
-from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
 from .contact import template_curve
+from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
 from .solid import cushion_solid
@@ -54,10 +56,11 @@ def gauge_mm(mask: str, vertices: np.ndarray) -> float:
 @lru_cache(maxsize=2)
 def population(mask: str) -> tuple[np.ndarray, np.ndarray]:
     """((POPULATION,) mm the gauge's measure, (POPULATION, K) mm each seal-curve point's depth along
-    the mask axis from the nasal bridge) over faces drawn from the shipped ICT model (seed 0)."""
+    the mask axis, `_seal_depth`) over faces drawn from the shipped ICT model (seed 0); read-only."""
     rng = np.random.default_rng(0)
     faces = [template_truth(random_subject(rng, 0.0)[0]) for _ in range(POPULATION)]
-    return np.array([gauge_mm(mask, v) for v in faces]), np.array([_seal_depth(mask, v) for v in faces])
+    measures, depths = np.array([gauge_mm(mask, v) for v in faces]), np.array([_seal_depth(mask, v) for v in faces])
+    return read_only(measures), read_only(depths)
 
 
 def population_gauge(mask: str) -> np.ndarray:
@@ -68,18 +71,18 @@ def population_gauge(mask: str) -> np.ndarray:
 @lru_cache(maxsize=2)
 def set_back(mask: str) -> np.ndarray:
     """(K,) mm per seal-curve point: how far a stock rim stands back along the mask axis from the
-    mean face (module docstring)."""
+    mean face (module docstring); read-only."""
     depth = population(mask)[1] - _seal_depth(mask, mean_face())
     standing_out = np.percentile(depth - depth.mean(axis=1, keepdims=True), SET_BACK_PERCENTILE, axis=0)
-    return standing_out - standing_out.min()
+    return read_only(standing_out - standing_out.min())
 
 
 def _seal_depth(mask: str, vertices: np.ndarray) -> np.ndarray:
     """(K,) mm: the template seal curve's points on a face of template vertices (N, 3) mm, along
-    the mask axis from its nasal bridge."""
+    the mask axis."""
     tri, bary = template_curve(mask)
-    curve = np.einsum("kj,kjc->kc", bary, vertices[load_template().faces[tri]])
-    return (curve - vertices[BRIDGE]) @ AXIS
+    return np.einsum("kj,kjc->kc", bary, vertices[load_template().faces[tri]]) @ AXIS
+
 
 
 def size_scale(mask: str, size: str) -> np.ndarray:
