@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from cpapfit.cushion.envelope import twisted_columns
+from cpapfit.cushion.nurbs import AROUND
 from cpapfit.evaluation.fit import FitParams, fit_rim
 from cpapfit.evaluation.membrane import BAND_MM, MEMBRANE_MAX_MM, bending_stiffness, reach_mm, width_for
 from cpapfit.evaluation.rim import REFINE_MM, refined
@@ -193,9 +195,6 @@ def test_a_sheet_closing_up_narrows_the_columns_that_shape_where_it_closes(k0):
     """A flat annular sheet whose rows close up between grid rows k0 and k0 + 1 of 128: that step
     lies between columns j + 1 and j + 2 (j = k0 AROUND // 128, `Cushion.membrane_thickness_at`),
     so the cubic's columns j..j + 3 are flagged (around the seal's end too), and none elsewhere."""
-    from cpapfit.cushion.envelope import twisted_columns
-    from cpapfit.cushion.nurbs import AROUND
-
     n_u = 128
     angle = 2 * np.pi * np.arange(n_u) / n_u
     radius = np.array([30.0, 27.0, 24.0])

@@ -84,7 +84,6 @@ def _seal_depth(mask: str, vertices: np.ndarray) -> np.ndarray:
     return np.einsum("kj,kjc->kc", bary, vertices[load_template().faces[tri]]) @ AXIS
 
 
-
 def size_scale(mask: str, size: str) -> np.ndarray:
     """(3,) the scale of a stock `size` about the nasal bridge, per template axis."""
     measures = population_gauge(mask)
