@@ -53,26 +53,27 @@ def gauge_mm(mask: str, vertices: np.ndarray) -> float:
     return float(np.linalg.norm(vertices[a] - vertices[b]))
 
 
-@lru_cache(maxsize=2)
-def population(mask: str) -> tuple[np.ndarray, np.ndarray]:
-    """((POPULATION,) mm the gauge's measure, (POPULATION, K) mm each seal-curve point's depth along
-    the mask axis, `_seal_depth`) over faces drawn from the shipped ICT model (seed 0); read-only."""
+@lru_cache(maxsize=1)
+def population() -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{mask: ((POPULATION,) mm the gauge's measure, (POPULATION, K) mm each seal-curve point's
+    depth along the mask axis, `_seal_depth`)} over faces drawn from the shipped ICT model (seed 0),
+    each face made once for both masks; read-only."""
     rng = np.random.default_rng(0)
     faces = [template_truth(random_subject(rng, 0.0)[0]) for _ in range(POPULATION)]
-    measures, depths = np.array([gauge_mm(mask, v) for v in faces]), np.array([_seal_depth(mask, v) for v in faces])
-    return read_only(measures), read_only(depths)
+    return {mask: (read_only(np.array([gauge_mm(mask, v) for v in faces])), read_only(np.array([_seal_depth(mask, v) for v in faces])))
+            for mask in SIZES}
 
 
 def population_gauge(mask: str) -> np.ndarray:
     """(POPULATION,) mm: the gauge's measure over the population's faces (`population`)."""
-    return population(mask)[0]
+    return population()[mask][0]
 
 
 @lru_cache(maxsize=2)
 def set_back(mask: str) -> np.ndarray:
     """(K,) mm per seal-curve point: how far a stock rim stands back along the mask axis from the
     mean face (module docstring); read-only."""
-    depth = population(mask)[1] - _seal_depth(mask, mean_face())
+    depth = population()[mask][1] - _seal_depth(mask, mean_face())
     standing_out = np.percentile(depth - depth.mean(axis=1, keepdims=True), SET_BACK_PERCENTILE, axis=0)
     return read_only(standing_out - standing_out.min())
 
