@@ -204,3 +204,19 @@ def test_a_sheet_closing_up_narrows_the_columns_that_shape_where_it_closes(k0):
     grid[after, 1:] = grid[k0, 1:] + 0.01 * (grid[after, 1:] - grid[k0, 1:])  # the inner rows stop moving around there
     j = k0 * AROUND // n_u
     assert set(np.flatnonzero(twisted_columns(grid))) == {(j + d) % AROUND for d in range(4)}
+
+
+def test_flaps_narrowed_where_the_sheet_twists_step_down_over_their_neighbours():
+    """Flaps 10.5 mm wide, narrowed to 7.9 mm on columns 12-21 and to 5 mm on column 0: each
+    neighbour of a narrowed stretch comes down to within TAPER_MM per column of it (9.9, 8.9 beside
+    the stretch, 6, 7, ... either side of column 0, round the seal's end), no flap widens, and
+    columns beyond the taper keep their 10.5 mm."""
+    from cpapfit.cushion.envelope import TAPER_MM, tapered
+
+    widths = np.full(AROUND, 10.5)
+    widths[12:22], widths[0] = 7.9, 5.0
+    out = tapered(widths)
+    assert (out <= widths).all() and np.abs(out - np.roll(out, 1)).max() <= TAPER_MM + 1e-12
+    assert out[[10, 11, 22, 23]] == pytest.approx([7.9 + 2 * TAPER_MM, 7.9 + TAPER_MM, 7.9 + TAPER_MM, 7.9 + 2 * TAPER_MM])
+    assert out[[AROUND - 2, AROUND - 1, 1, 2]] == pytest.approx([5.0 + 2 * TAPER_MM, 5.0 + TAPER_MM, 5.0 + TAPER_MM, 5.0 + 2 * TAPER_MM])
+    assert out[12:22] == pytest.approx(np.full(10, 7.9)) and out[6] == 10.5

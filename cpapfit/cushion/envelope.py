@@ -14,9 +14,11 @@ most INWARD_SHARE of the width at which it and its neighbours would meet (where 
 bends tightly inwards, beside a nostril, the flaps fan out across the bend, `flap_directions`, but
 still run together). Wherever the membrane's sheet still turns back on itself or closes up across
 the seal (`twisted_columns`), those columns narrow by SHRINK, and the whole membrane while its
-solid would cross itself. Where a flap so narrowed falls short of its need, its sheet is
-thinner, down to THINNEST_MM (`flap_thickness`): the reach grows as the cube of the thickness
-falls, so a flap that cannot widen still closes the opening.
+solid would cross itself; a face's own flaps (not the stock family's) narrowed so step down from
+their neighbours by at most TAPER_MM a column (`tapered`: a sudden step in width folds the sheet
+beside it, which would narrow it further there). Where a flap so narrowed falls short of its
+need, its sheet is thinner, down to THINNEST_MM (`flap_thickness`): the reach grows as the cube
+of the thickness falls, so a flap that cannot widen still closes the opening.
 """
 
 from dataclasses import replace
@@ -41,6 +43,7 @@ REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's sl
 WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
 INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
 SHRINK, SHRINKS = 0.75, 6
+TAPER_MM = 1.0  # mm per control column (about 6 mm of seal): a flap narrowed where its sheet twists steps down over its neighbours
 THINNEST_MM = 0.3  # the thinnest membrane: the reach law holds to the finite elements within 0.15 mm down to it (section 15)
 THICKNESS_STEPS = 10  # bisection steps for a flap's thickness: to 0.2 um
 PEAK_MARGIN_KPA = 0.4  # the headgear force stops where the awake peak comes this far under capillary closing (the prediction's doubt)
@@ -145,8 +148,10 @@ def with_flaps(
     `widths` (AROUND,) mm, its `wall` solid joined to them; narrowed where the membrane's sheet would
     twist (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
     SHRINKS times each. `need` {CPAP kPa: (AROUND,) mm}: the reach each column's flap must have at
-    each pressure; where a flap is narrower than reaches it, its sheet is thinner
-    (`flap_thickness`); None: `params.membrane_mm` throughout."""
+    each pressure; the flaps are then sized for this face: a narrowed stretch's neighbours step
+    down to it (`tapered`), and where a flap is narrower than reaches its need, its sheet is
+    thinner (`flap_thickness`). None (the stock family's flaps, modelled once): neither, and
+    `params.membrane_mm` throughout."""
     def sized_for(widths: np.ndarray) -> Cushion:
         flaps = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
         return flaps if need is None else replace(flaps, membrane_thickness=flap_thickness(need, widths, params.membrane_mm))
@@ -157,6 +162,7 @@ def with_flaps(
         if not twisted.any():
             break
         widths = np.where(twisted, SHRINK * widths, widths)
+        widths = widths if need is None else tapered(widths)
     for _ in range(SHRINKS + 1):
         solid, thinnest = with_membrane(sized, wall, contact.normals)
         if self_intersecting_edges(solid) == 0:
@@ -164,6 +170,15 @@ def with_flaps(
         widths = SHRINK * widths
         sized = sized_for(widths)
     return sized, solid, thinnest
+
+
+def tapered(widths: np.ndarray) -> np.ndarray:
+    """(AROUND,) mm: `widths` (AROUND,) mm around the closed seal curve lowered where needed so that
+    neighbouring columns differ by at most TAPER_MM (each the least over the others of their width
+    plus TAPER_MM per column between)."""
+    steps = np.arange(len(widths))
+    between = np.minimum(steps, len(widths) - steps)
+    return np.min([np.roll(widths, k) + TAPER_MM * between[k] for k in steps], axis=0)
 
 
 def twisted_columns(grid: np.ndarray) -> np.ndarray:
