@@ -14,11 +14,12 @@ most INWARD_SHARE of the width at which it and its neighbours would meet (where 
 bends tightly inwards, beside a nostril, the flaps fan out across the bend, `flap_directions`, but
 still run together). Wherever the membrane's sheet still turns back on itself or closes up across
 the seal (`twisted_columns`), those columns narrow by SHRINK, and the whole membrane while its
-solid would cross itself; a face's own flaps (not the stock family's) narrowed so step down from
-their neighbours by at most TAPER_MM a column (`tapered`: a sudden step in width folds the sheet
-beside it, which would narrow it further there). Where a flap so narrowed falls short of its
-need, its sheet is thinner, down to THINNEST_MM (`flap_thickness`): the reach grows as the cube
-of the thickness falls, so a flap that cannot widen still closes the opening.
+solid would cross itself; beside a stretch of a face's own flaps (not the stock family's) so
+narrowed, its neighbours step down to it by at most TAPER_MM a column (`tapered`: a sudden step
+in width folds the sheet beside it, which would narrow it further there). Where a flap so
+narrowed falls short of its need, its sheet is thinner, down to THINNEST_MM (`flap_thickness`):
+the reach grows as the cube of the thickness falls, so a flap that cannot widen still closes
+the opening.
 """
 
 from dataclasses import replace
@@ -148,8 +149,8 @@ def with_flaps(
     `widths` (AROUND,) mm, its `wall` solid joined to them; narrowed where the membrane's sheet would
     twist (`twisted_columns`), and everywhere while its solid would cross itself, by SHRINK at most
     SHRINKS times each. `need` {CPAP kPa: (AROUND,) mm}: the reach each column's flap must have at
-    each pressure; the flaps are then sized for this face: a narrowed stretch's neighbours step
-    down to it (`tapered`), and where a flap is narrower than reaches its need, its sheet is
+    each pressure; the flaps are then sized for this face: the neighbours of the columns each
+    narrowing takes in step down to them (`tapered`), and where a flap is narrower than reaches its need, its sheet is
     thinner (`flap_thickness`). None (the stock family's flaps, modelled once): neither, and
     `params.membrane_mm` throughout."""
     def sized_for(widths: np.ndarray) -> Cushion:
@@ -162,7 +163,8 @@ def with_flaps(
         if not twisted.any():
             break
         widths = np.where(twisted, SHRINK * widths, widths)
-        widths = widths if need is None else tapered(widths)
+        if need is not None:
+            widths = np.minimum(widths, tapered(np.where(twisted, widths, np.inf)))
     for _ in range(SHRINKS + 1):
         solid, thinnest = with_membrane(sized, wall, contact.normals)
         if self_intersecting_edges(solid) == 0:
@@ -174,8 +176,8 @@ def with_flaps(
 
 def tapered(widths: np.ndarray) -> np.ndarray:
     """(AROUND,) mm: `widths` (AROUND,) mm around the closed seal curve lowered where needed so that
-    neighbouring columns differ by at most TAPER_MM (each the least over the others of their width
-    plus TAPER_MM per column between)."""
+    no column stands more than TAPER_MM a column above another (each the least, over all columns
+    itself included, of their width plus TAPER_MM per column between; inf widths impose nothing)."""
     steps = np.arange(len(widths))
     between = np.minimum(steps, len(widths) - steps)
     return np.min([np.roll(widths, k) + TAPER_MM * between[k] for k in steps], axis=0)
