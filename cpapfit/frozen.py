@@ -10,7 +10,7 @@ def freeze_arrays(obj) -> None:
     for field in dataclasses.fields(obj):
         value = getattr(obj, field.name)
         if isinstance(value, np.ndarray):
-            value.flags.writeable = False
+            read_only(value)
 
 
 def read_only(array: np.ndarray) -> np.ndarray:
