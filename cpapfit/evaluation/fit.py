@@ -197,7 +197,7 @@ def fit_cushion(cushion: trimesh.Trimesh, face: Face, width_mm: float, force_n: 
 def fit_rim(rim: RimContact, face: Face, width_mm: float, force_n: float | None, params: FitParams = FitParams()) -> CushionFit:
     """`fit_cushion` of a cushion whose contact line on this face is `rim` (the same cushion at
     another force: `at_force`)."""
-    k = stiffness(rim.points, np.asarray(face.registered.vertices), params.tissue)
+    k = stiffness(face.registered.kdtree.query(rim.points)[1], params.tissue)
     force = recommended_force(rim, k.effective, width_mm, params) if force_n is None else force_n
     return _fitted(rim, k, width_mm, force, seal_force(rim, k.effective, width_mm, params), params)
 
@@ -232,7 +232,7 @@ def compensating_preload(
     every point presses with the target pressure: soft tissue gets more pre-load, the stiff
     nasal bridge none; smoothed along the curve (Gaussian, `smoothing` samples) so the rim does
     not bend tighter than its wall. `normals` (K, 3) skin normals; `warped` the registered template."""
-    k = stiffness(curve, warped, params.tissue).effective
+    k = stiffness(cKDTree(warped).query(curve)[1], params.tissue).effective
     need = params.target_kpa / (k * np.maximum(np.abs(normals @ axis), COS_MIN))  # axial indentation, mm
     return _bounded(gaussian_filter1d(np.minimum(need, need.min() + MAX_PRELOAD_MM), smoothing, mode="wrap"))
 

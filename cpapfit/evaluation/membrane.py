@@ -110,16 +110,15 @@ def rim_membrane(vertices: np.ndarray, thickness: np.ndarray, rim: np.ndarray, s
     turns reads a few points too wide, never a whole stretch. Width 0 where the section has none."""
     thin = np.flatnonzero(thickness <= MEMBRANE_MAX_MM)
     owner = cKDTree(rim).query(vertices[thin])[1]
-    order = np.argsort(owner, kind="stable")
-    thin, owner = thin[order], owner[order]
-    starts = np.searchsorted(owner, np.arange(len(rim) + 1))
     tangent = np.roll(rim, -TANGENT_STEP, axis=0) - np.roll(rim, TANGENT_STEP, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
-    width, mean_t = np.zeros(len(rim)), np.zeros(len(rim))
-    for k in range(len(rim)):
-        near = np.concatenate([thin[starts[j]:starts[j + 1]] for j in (k + np.arange(-spread, spread + 1)) % len(rim)])
-        offset = vertices[near] - rim[k]
-        cut = np.abs(offset @ tangent[k]) <= SLAB_MM
-        if cut.any():
-            width[k], mean_t[k] = np.linalg.norm(offset[cut], axis=1).max(), thickness[near[cut]].mean()
+    k = (owner[:, None] + np.arange(-spread, spread + 1)) % len(rim)  # (M, 2 spread + 1) the sections each may lie in
+    along = np.take_along_axis(vertices[thin] @ tangent.T, k, axis=1) - np.einsum("ij,ij->i", rim, tangent)[k]
+    pair, step = np.nonzero(np.abs(along) <= SLAB_MM)
+    near, k = thin[pair], k[pair, step]
+    offset = vertices[near] - rim[k]
+    width = np.zeros(len(rim))
+    np.maximum.at(width, k, np.linalg.norm(offset, axis=1))
+    count = np.bincount(k, minlength=len(rim))
+    mean_t = np.bincount(k, weights=thickness[near], minlength=len(rim)) / np.maximum(count, 1)
     return grey_opening(width, size=RUN, mode="wrap"), mean_t

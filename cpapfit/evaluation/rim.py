@@ -14,6 +14,7 @@ measured, per sector, for the seal it adds.
 """
 
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 import trimesh
@@ -246,7 +247,12 @@ def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, re
 def _first_hit(points: np.ndarray, mesh: trimesh.Trimesh, directions: np.ndarray, reach: float):
     """(distance (V,) mm to the first surface along each unit direction (V, 3), NaN where none
     within `reach`; that surface's normal . direction (V,))."""
-    loc, ray, tri = mesh.ray.intersects_location(points, directions, multiple_hits=False)
+    directions = trimesh.util.unitize(np.asarray(directions, dtype=np.float64))
+    first = mesh.ray.intersects_first(points, directions)
+    ray = np.flatnonzero(first >= 0)
+    tri = first[ray]
+    loc, valid = trimesh.intersections.planes_lines(mesh.triangles[tri, 0], mesh.face_normals[tri], points[ray], directions[ray])
+    ray, tri = ray[valid], tri[valid]
     distance, facing = np.full(len(points), np.nan), np.zeros(len(points))
     near = np.linalg.norm(loc - points[ray], axis=1) <= reach
     distance[ray[near]] = np.linalg.norm(loc[near] - points[ray[near]], axis=1)
@@ -306,23 +312,33 @@ def _skin_planes(skin: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -
     found = np.flatnonzero(np.isfinite(skin).all(axis=1))
     points, tree = np.asarray(scan.vertices), scan.kdtree
     nearest = tree.query(skin[found])[1]
-    for i, near, idx in zip(found, nearest, tree.query_ball_point(skin[found], NORMAL_MM)):
-        if len(idx):
-            centres[i] = points[idx].mean(axis=0)
-        if isinstance(scan, trimesh.Trimesh) and len(idx):
-            around = scan.vertex_normals[[near, *idx]]
-            normal = around[around @ around[0] > 0].sum(axis=0)
-        elif isinstance(scan, trimesh.Trimesh):
-            own = _closest_points(skin[i : i + 1], scan)[1][0]
-            normal = scan.face_normals[own] if own >= 0 else np.zeros(3)
-        elif len(idx) >= NORMAL_POINTS:
-            normal = np.linalg.svd(points[idx] - points[idx].mean(axis=0), full_matrices=False)[2][-1]
-        else:
-            continue
-        length = np.linalg.norm(normal)
-        if length > 0:  # not a degenerate patch whose normals cancel
-            normals[i] = normal / length
+    balls = tree.query_ball_point(skin[found], NORMAL_MM)
+    count = np.fromiter(map(len, balls), dtype=int, count=len(found))
+    ball, row = np.fromiter(chain.from_iterable(balls), dtype=int, count=count.sum()), np.repeat(np.arange(len(found)), count)
+    some = count > 0
+    centres[found[some]] = _row_sums(points[ball], row, len(found))[some] / count[some, None]
+    if isinstance(scan, trimesh.Trimesh):
+        own = scan.vertex_normals[nearest]
+        around = scan.vertex_normals[ball]
+        facing = np.einsum("ij,ij->i", around, own[row]) > 0
+        normal = own + _row_sums(around * facing[:, None], row, len(found))
+        for i in np.flatnonzero(~some):
+            tri = _closest_points(skin[found[i] : found[i] + 1], scan)[1][0]
+            normal[i] = scan.face_normals[tri] if tri >= 0 else 0.0
+    else:
+        normal = np.zeros((len(found), 3))
+        for i in np.flatnonzero(count >= NORMAL_POINTS):
+            near = points[balls[i]]
+            normal[i] = np.linalg.svd(near - near.mean(axis=0), full_matrices=False)[2][-1]
+    length = np.linalg.norm(normal, axis=1)
+    ok = length > 0  # not a degenerate patch whose normals cancel
+    normals[found[ok]] = normal[ok] / length[ok, None]
     return normals, centres
+
+
+def _row_sums(values: np.ndarray, row: np.ndarray, rows: int) -> np.ndarray:
+    """(rows, 3): the sum of the (N, 3) `values` of each row index (N,)."""
+    return np.stack([np.bincount(row, weights=values[:, c], minlength=rows) for c in range(3)], axis=1)
 
 
 def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from ..template import load_template
@@ -85,12 +84,11 @@ class Stiffness:
         freeze_arrays(self)
 
 
-def stiffness(points: np.ndarray, warped: np.ndarray, model: TissueModel = TissueModel()) -> Stiffness:
-    """Stiffness under (K, 3) mm points on the patient, located on the face through the registered
-    template `warped` (N, 3) mm (template vertex order)."""
+def stiffness(vertex: np.ndarray, model: TissueModel = TissueModel()) -> Stiffness:
+    """Stiffness under (K,) points on the patient, each located on the face by its nearest
+    template vertex (`vertex` (K,) indices into the template, e.g. the nearest registered one)."""
     template = load_template()
-    _, nearest = cKDTree(warped).query(points)
-    where = template.vertices[nearest]  # the points' places on the template face
+    where = template.vertices[vertex]  # the points' places on the template face
     names = list(model.regions)
     log_k = np.log([r.stiffness_kpa_per_mm for r in model.regions.values()])
     weight = np.stack([_closeness(where, template.vertices[list(model.regions[n].anchors)], model.blend_mm) for n in names], axis=1)
