@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import __version__
+from .cushion.stock import population
 from .errors import CpapfitError, InputError
 from .io import is_fused, load_scan
 from .outputs import design_files, report_files
@@ -54,14 +55,17 @@ class DesignRun:
 
 
 @contextlib.contextmanager
-def worker(parallel: bool):
+def worker(parallel: bool, shared: Callable[[], object] | None = None):
     """`submit` for work done alongside (`work.py`): a worker process forked now, while this process
     runs a single thread (a fork copies only the calling thread: one taken after MediaPipe and
     Embree have started theirs could hang in the child), or `at_once` when not parallel, not
-    single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU)."""
+    single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU).
+    `shared`: called first, here, for what it caches, which both processes need (else each makes it)."""
     if not (parallel and _single_threaded() and _idle_core()):
         yield at_once
         return
+    if shared is not None:
+        shared()
     gc.freeze()  # the fork shares this memory: the collector's passes would otherwise copy every page of it
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         pool.submit(int).result()  # the fork, now
@@ -92,8 +96,8 @@ def design_job(
 ) -> tuple[DesignRun, dict[str, bytes]]:
     """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
     files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes and some report pictures made in a second
-    process (`worker`)."""
-    with worker(parallel) as submit:
+    process (`worker`; the stock family's population, which both processes need, made first)."""
+    with worker(parallel, population if stock else None) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
         d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock)

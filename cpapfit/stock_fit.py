@@ -25,7 +25,7 @@ from .errors import InputError, NoStockSeat
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
 from .evaluation.states import StateFit, fit_states, merged, sleep_states
-from .work import at_once
+from .work import Shared, at_once
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals
@@ -103,14 +103,15 @@ SIZE_KEYS = ("leak_l_min", "window_fraction", "pressure_max_kpa", "pressure_max_
 
 @dataclass(frozen=True)
 class StockFitting:
-    """Stock sizes handed to `submit` (`work.py`: a worker process's, or at once) to be seated on
-    `face` while other work goes on; `comparison` gathers them, seating here any size the worker
-    has not started yet."""
+    """Stock sizes being seated on `face` by `submit` (`work.py`: a worker process's, or at once),
+    one at a time, while other work goes on; `comparison` gathers them, seating here, from the
+    last, the sizes the worker has not been handed yet (`work.Shared`)."""
 
     mask: str
     face: Face
     gauge: str  # the size the gauge picks for this face
-    seats: tuple  # ((size, Future of its StockFit), ...) in SIZES order
+    sizes: tuple[str, ...]  # in SIZES order
+    seats: Shared  # each size's StockFit (or None), being made
     params: CushionParams
     fit_params: FitParams
     submit: Callable
@@ -118,14 +119,13 @@ class StockFitting:
     def comparison(self, asleep: bool = True) -> StockComparison:
         """The `StockComparison`; `asleep`: the best size (and the gauge's) pressed in each sleep state too."""
         mask, face, params, fit_params = self.mask, self.face, self.params, self.fit_params
-        done = {size: seated(mask, size, face, params, fit_params) if job.cancel() else job.result()
-                for size, job in reversed(self.seats)}  # from the end: the sizes the worker is least likely to have started
-        sizes = tuple(sorted((done[size] for size, _ in self.seats if done[size] is not None), key=StockFit.rank))
+        done = dict(zip(self.sizes, self.seats.results()))
+        sizes = tuple(sorted((fit for fit in done.values() if fit is not None), key=StockFit.rank))
         if not sizes:
-            raise NoStockSeat(f"no {mask} stock size tried ({', '.join(size for size, _ in self.seats)}) finds its rim over "
+            raise NoStockSeat(f"no {mask} stock size tried ({', '.join(self.sizes)}) finds its rim over "
                              "this face at any seat: its wall does not run all the way round the mask axis over the face, "
                              "or lies over too little scanned skin")
-        compared = StockComparison(sizes, self.gauge, (), not_seated=tuple(size for size, _ in self.seats if done[size] is None))
+        compared = StockComparison(sizes, self.gauge, (), not_seated=tuple(size for size, fit in done.items() if fit is None))
         gauge_fit = compared.gauge_fit
         if not asleep:
             return compared
@@ -140,8 +140,8 @@ def fitting_stock(mask: str, face: Face, choice: str = "best", params: CushionPa
     "gauge" (the size the gauge picks) or "best" (every size, the best kept)."""
     gauge = gauge_size(mask, np.asarray(face.registered.vertices))
     sizes = SIZES[mask] if choice == "best" else (gauge if choice == "gauge" else choice,)
-    seats = tuple((size, submit(seated, mask, size, face, params, fit_params)) for size in sizes)
-    return StockFitting(mask, face, gauge, seats, params, fit_params, submit)
+    seats = Shared(submit, seated, [(mask, size, face, params, fit_params) for size in sizes])
+    return StockFitting(mask, face, gauge, tuple(sizes), seats, params, fit_params, submit)
 
 
 def compared_stock(mask: str, face: Face, choice: str = "best", params: CushionParams = CushionParams(),

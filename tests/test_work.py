@@ -1,0 +1,41 @@
+"""Work shared between a worker process and this one (`cpapfit.work`)."""
+
+import multiprocessing
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+from cpapfit.work import Shared, at_once
+
+
+def _job(seconds: float, value: int) -> tuple[int, int]:
+    """(value squared, the pid that did it), after `seconds` asleep."""
+    time.sleep(seconds)
+    return value * value, os.getpid()
+
+
+def test_shared_work_the_worker_busy_leaves_the_rest_to_this_process_from_the_last():
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        pool.submit(int).result()  # the worker forked
+        shared = Shared(pool.submit, _job, [(1.0, 0), (0.0, 1), (0.0, 2), (0.0, 3)])
+        out = shared.results()
+    assert [value for value, _ in out] == [0, 1, 4, 9]
+    assert out[0][1] != os.getpid()  # the one the worker was handed
+    assert [pid for _, pid in out[1:]] == [os.getpid()] * 3  # not queued ahead in the pool: done here
+
+
+def test_shared_work_handed_on_as_each_is_done():
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        pool.submit(int).result()
+        shared = Shared(pool.submit, _job, [(0.0, v) for v in range(4)])
+        time.sleep(2.0)  # the worker takes each in turn meanwhile
+        out = shared.results()
+    assert [value for value, _ in out] == [0, 1, 4, 9]
+    assert all(pid != os.getpid() for _, pid in out)
+
+
+def test_shared_work_at_once_is_done_in_order_as_it_is_made():
+    done = []
+    shared = Shared(at_once, lambda v: done.append(v) or -v, [(v,) for v in range(3)])
+    assert done == [0, 1, 2]
+    assert shared.results() == [0, -1, -2]
