@@ -247,16 +247,16 @@ def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, re
 def _first_hit(points: np.ndarray, mesh: trimesh.Trimesh, directions: np.ndarray, reach: float):
     """(distance (V,) mm to the first surface along each unit direction (V, 3), NaN where none
     within `reach`; that surface's normal . direction (V,))."""
-    directions = trimesh.util.unitize(np.asarray(directions, dtype=np.float64))
     first = mesh.ray.intersects_first(points, directions)
     ray = np.flatnonzero(first >= 0)
     tri = first[ray]
-    loc, valid = trimesh.intersections.planes_lines(mesh.triangles[tri, 0], mesh.face_normals[tri], points[ray], directions[ray])
-    ray, tri = ray[valid], tri[valid]
+    normals = mesh.face_normals[tri]
+    _, valid, along = trimesh.intersections.planes_lines(mesh.vertices[mesh.faces[tri, 0]], normals, points[ray], directions[ray],
+                                                         return_distance=True)
+    ray, along, normals = ray[valid], np.abs(along), normals[valid]
     distance, facing = np.full(len(points), np.nan), np.zeros(len(points))
-    near = np.linalg.norm(loc - points[ray], axis=1) <= reach
-    distance[ray[near]] = np.linalg.norm(loc[near] - points[ray[near]], axis=1)
-    facing[ray] = np.einsum("ij,ij->i", mesh.face_normals[tri], directions[ray])
+    distance[ray[along <= reach]] = along[along <= reach]
+    facing[ray] = np.einsum("ij,ij->i", normals, directions[ray])
     return distance, facing
 
 
