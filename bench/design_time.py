@@ -5,7 +5,14 @@ the CPU time of the run (its processes' user + system time, which other jobs on 
 change far less), the load average when it started and the largest resident memory of any run
 so far.
 
-Usage: .venv/bin/python bench/design_time.py [--repeat N]
+With --against DIR (another source tree of cpapfit, e.g. a git worktree of an earlier commit), the
+real-sized cases instead (phantom seed 3's capture, ICT heads 8003 and 8020 as PLY, fran, the
+TrueDepth frame; both masks but the frame's oronasal, which its scan hole refuses) are designed
+in turn by that tree, by this one, and by this one with `--stock none` (no stock comparison),
+each run from a scratch folder with its tree first on PYTHONPATH, and each case's medians and
+their ratios to the other tree's are printed.
+
+Usage: .venv/bin/python bench/design_time.py [--repeat N] [--against DIR]
 """
 
 import argparse
@@ -21,16 +28,20 @@ from pathlib import Path
 
 import trimesh
 
+from cpapfit.ict import load_ict
+from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.synthetic.template_phantom import make_phantom
+from ict_bench import FULL_MODEL
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 
-def run(*args: str) -> tuple[float, float]:
-    """(wall seconds, CPU seconds of the run's processes) of `cpapfit ARGS`."""
+def run(*args: str, tree: Path | None = None, cwd: str | None = None) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of the run's processes) of `cpapfit ARGS` (`tree`: that source tree first on PYTHONPATH)."""
+    env = os.environ | {"PYTHONPATH": str(tree)} if tree else None
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "cpapfit", *args], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-m", "cpapfit", *args], capture_output=True, text=True, env=env, cwd=cwd)
     if done.returncode:
         sys.exit(f"cpapfit {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()}")
     wall = time.perf_counter() - t0
@@ -45,13 +56,43 @@ def dense_mesh(path: Path) -> None:
     trimesh.Trimesh(vertices / 1000.0, faces, process=False).export(path)
 
 
+def against(other: Path, repeat: int, tmp: str) -> None:
+    """Each real-sized case designed in turn by the `other` tree, this one, and this one with `--stock none` (module docstring)."""
+    this = Path(__file__).resolve().parents[1]
+    cases = [("phantom seed 3", f"{tmp}/p3", mask) for mask in ("nasal", "oronasal")]
+    if FULL_MODEL.is_file():
+        for seed in (8003, 8020):
+            ict_head_mesh(seed, model=load_ict(FULL_MODEL)).mesh.export(f"{tmp}/ict{seed}.ply")
+            cases += [(f"ICT head {seed}", f"{tmp}/ict{seed}.ply", mask) for mask in ("nasal", "oronasal")]
+    if (SHARED / "fran_cyberware" / "fran.obj").exists():
+        cases += [("fran", str(SHARED / "fran_cyberware" / "fran.obj"), mask) for mask in ("nasal", "oronasal")]
+    if (SHARED / "rgbd_truedepth_mannequin").is_dir():
+        cases.append(("TrueDepth frame", str(SHARED / "rgbd_truedepth_mannequin"), "nasal"))
+    ways = {"other": (other, ()), "this": (this, ()), "this --stock none": (this, ("--stock", "none"))}
+    print(f"other: {other}; this: {this}; {repeat} runs each, in turn; wall s (CPU s)")
+    for name, scan, mask in cases:
+        times = {way: [] for way in ways}
+        for i in range(repeat):
+            for k, (way, (tree, extra)) in enumerate(ways.items()):
+                times[way].append(run("design", scan, "--mask", mask, "--out", f"{tmp}/out-{i}-{k}", "--quiet", *extra, tree=tree, cwd=tmp))
+        median = {way: statistics.median(w for w, _ in runs) for way, runs in times.items()}
+        shown = "; ".join(f"{way} {', '.join(f'{w:.1f} ({c:.1f})' for w, c in runs)}" for way, runs in times.items())
+        print(f"{name} {mask}: {shown}; median ratio to other: this {median['this'] / median['other']:.2f}, "
+              f"--stock none {median['this --stock none'] / median['other']:.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
-    repeat = parser.parse_args().repeat
+    parser.add_argument("--against", type=Path, default=None, help="another source tree to time the same cases with")
+    args = parser.parse_args()
+    repeat = args.repeat
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     with tempfile.TemporaryDirectory() as tmp:
         run("phantom", "--seed", "3", "--population", "template", "--out", f"{tmp}/p3")
+        if args.against:
+            against(args.against.resolve(), repeat, tmp)
+            return
         dense_mesh(Path(tmp) / "dense.ply")
         cases = [("phantom seed 3", f"{tmp}/p3", mask) for mask in ("nasal", "oronasal")]
         cases.append(("phantom seed 3 as a dense mesh", f"{tmp}/dense.ply", "nasal"))
