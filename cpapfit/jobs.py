@@ -61,11 +61,11 @@ def worker(parallel: bool, shared: Callable[[], object] | None = None):
     Embree have started theirs could hang in the child), or `at_once` when not parallel, not
     single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU).
     `shared`: called first, here, for what it caches, which both processes need (else each makes it)."""
+    if parallel and shared is not None:
+        shared()  # before the checks: what it does must leave this process single-threaded to be forked
     if not (parallel and _single_threaded() and _idle_core()):
         yield at_once
         return
-    if shared is not None:
-        shared()
     gc.freeze()  # the fork shares this memory: the collector's passes would otherwise copy every page of it
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         pool.submit(int).result()  # the fork, now

@@ -32,6 +32,7 @@ class Shared:
         self._submit, self._fn = submit, fn
         self._todo = list(enumerate(jobs))
         self._handed: dict[int, Future] = {}
+        self._here: dict[int, object] = {}
         self._lock = threading.Lock()
         self._hand_on()
 
@@ -50,11 +51,10 @@ class Shared:
 
     def results(self) -> list:
         """Every job's fn(*args), in order; the worker's exceptions are raised here."""
-        here = {}
         while True:
             with self._lock:
                 if not self._todo:
                     break
                 i, args = self._todo.pop()
-            here[i] = self._fn(*args)
-        return [here[i] if i in here else self._handed[i].result() for i in range(len(here) + len(self._handed))]
+            self._here[i] = self._fn(*args)
+        return [self._here[i] if i in self._here else self._handed[i].result() for i in range(len(self._here) + len(self._handed))]

@@ -4,6 +4,7 @@ import multiprocessing
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 from cpapfit.work import Shared, at_once
 
@@ -24,11 +25,21 @@ def test_shared_work_the_worker_busy_leaves_the_rest_to_this_process_from_the_la
     assert [pid for _, pid in out[1:]] == [os.getpid()] * 3  # not queued ahead in the pool: done here
 
 
-def test_shared_work_handed_on_as_each_is_done():
+def _marked(path: Path, value: int) -> tuple[int, int]:
+    """`_job` at once, leaving a file named after `value` in `path` when done."""
+    out = _job(0.0, value)
+    (path / str(value)).touch()
+    return out
+
+
+def test_shared_work_handed_on_as_each_is_done(tmp_path):
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         pool.submit(int).result()
-        shared = Shared(pool.submit, _job, [(0.0, v) for v in range(4)])
-        time.sleep(2.0)  # the worker takes each in turn meanwhile
+        shared = Shared(pool.submit, _marked, [(tmp_path, v) for v in range(4)])
+        for _ in range(600):  # the worker takes each in turn meanwhile
+            if len(list(tmp_path.iterdir())) == 4:
+                break
+            time.sleep(0.05)
         out = shared.results()
     assert [value for value, _ in out] == [0, 1, 4, 9]
     assert all(pid != os.getpid() for _, pid in out)
@@ -38,4 +49,4 @@ def test_shared_work_at_once_is_done_in_order_as_it_is_made():
     done = []
     shared = Shared(at_once, lambda v: done.append(v) or -v, [(v,) for v in range(3)])
     assert done == [0, 1, 2]
-    assert shared.results() == [0, -1, -2]
+    assert shared.results() == shared.results() == [0, -1, -2]
