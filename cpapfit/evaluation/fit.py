@@ -12,8 +12,8 @@ from scipy.spatial import cKDTree
 from ..frozen import freeze_arrays
 from ..template import load_template
 from .leak import leak_l_min
-from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, cpap_load_n, press
-from .membrane import reach_mm
+from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, cpap_load_n, least_force_n, press, pull_n
+from .membrane import reach_mm, root_pull_kpa_mm
 from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
 
@@ -114,9 +114,21 @@ def _least_median_most(values: np.ndarray) -> list[float]:
 
 
 def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float) -> Pressed:
-    """`press` over the covered points of a rim."""
+    """`press` over the covered points of a rim, its membrane pulling."""
     c = rim.covered
-    return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa)
+    return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa,
+                 _pull(rim, cpap_kpa))
+
+
+def _pull(rim: RimContact, cpap_kpa: float) -> np.ndarray:
+    """(covered,) N: the membrane's pull at each covered rim point (`mechanics.pull_n`)."""
+    c = rim.covered
+    return pull_n(root_pull_kpa_mm(rim.membrane_mm[c], rim.membrane_thickness_mm[c], cpap_kpa), rim.ds[c], rim.cos[c])
+
+
+def _least_force(rim: RimContact, cpap_kpa: float) -> float:
+    """N: the least headgear force that holds this rim on (`mechanics.least_force_n`)."""
+    return least_force_n(cpap_kpa, rim.sealed_area_mm2, _pull(rim, cpap_kpa))
 
 
 def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray:
@@ -136,7 +148,7 @@ def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
 
     if opened(params.max_force_n):
         return None
-    return _bisected(opened, cpap_load_n(params.cpap_kpa, rim.sealed_area_mm2), params.max_force_n, tol_n)[1]
+    return _bisected(opened, _least_force(rim, params.cpap_kpa), params.max_force_n, tol_n)[1]
 
 
 def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, peak_kpa: float, tol_n: float = 0.01) -> float:
@@ -148,7 +160,7 @@ def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
 
     if not over(params.max_force_n):
         return params.max_force_n
-    return _bisected(lambda force: not over(force), cpap_load_n(params.cpap_kpa, rim.sealed_area_mm2), params.max_force_n, tol_n)[0]
+    return _bisected(lambda force: not over(force), _least_force(rim, params.cpap_kpa), params.max_force_n, tol_n)[0]
 
 
 def _bisected(below: Callable[[float], bool], lo: float, hi: float, tol_n: float) -> tuple[float, float]:

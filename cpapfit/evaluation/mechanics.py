@@ -6,10 +6,16 @@ its normal by a_i * cos_i and presses back with p_i = k_i * a_i * cos_i (kPa) ov
 area A_i = flange width * ds_i; along the axis that is a spring of stiffness k_i A_i cos_i^2.
 The headgear force F (N) pushes along the axis through the centroid of the contact band
 (weighted by A_i cos_i); the CPAP pressure P over the sealed area pushes the mask off, taken
-through the same line. The equilibrium minimises the convex energy
-    sum_i 1/2 k_i A_i cos_i^2 max(a_i, 0)^2 - (F - P * sealed area) * d,
-i.e. force balance along the axis and moment balance about the two axes across it.
-Where p_i < P the air lifts the seal open by (P - p_i) / k_i (normal, mm).
+through the same line. A membrane flap pulls its wall towards the skin by its root's share of the
+air's push on the span it bridges to the skin (`membrane.root_pull_kpa_mm`): the pull q_i (N, along
+the axis) where the wall stands at the skin or off it, easing to none once the wall is pressed
+ROOT_MM into it (its root is down on the skin then, and the flap lies on the skin from there). The
+equilibrium minimises the convex energy
+    sum_i [1/2 k_i A_i cos_i^2 max(a_i, 0)^2 + V_i(a_i)] - (F - P * sealed area) * d,
+V_i' = -q_i min(max(1 - a_i cos_i / ROOT_MM, 0), 1), i.e. force balance along the axis and moment
+balance about the two axes across it; with no contact at all the pulls must hold the mask on
+alone (`least_force_n`), else the CPAP load lifts it off. Where p_i < P the air lifts the seal
+open by (P - p_i) / k_i (normal, mm).
 """
 
 from dataclasses import dataclass
@@ -18,6 +24,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..frozen import freeze_arrays
+from .membrane import ROOT_MM
 
 COS_MIN = 0.2  # skin steeper than ~78 degrees to the axis is treated as 78 degrees
 N_PER_KPA_MM2 = 1e-3
@@ -44,27 +51,47 @@ def cpap_load_n(cpap_kpa: float, sealed_area_mm2: float) -> float:
     return cpap_kpa * sealed_area_mm2 * N_PER_KPA_MM2
 
 
-def press(clearance, cos, area_mm2, k, uv, sealed_area_mm2: float, force_n: float, cpap_kpa: float) -> Pressed:
+def pull_n(pull_kpa_mm: np.ndarray, ds: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """(K,) N along the axis: the flaps' pulls (K,) kPa mm per mm of rim (`membrane.root_pull_kpa_mm`)
+    over rim lengths `ds` (K,) mm, at skin slopes `cos` (K,)."""
+    return pull_kpa_mm * ds * np.maximum(cos, COS_MIN) * N_PER_KPA_MM2
+
+
+def least_force_n(cpap_kpa: float, sealed_area_mm2: float, pull: np.ndarray) -> float:
+    """N: the least headgear force that holds a mask on: the CPAP load on `sealed_area_mm2` less the
+    flaps' whole pull (K,) N (`pull_n`)."""
+    return cpap_load_n(cpap_kpa, sealed_area_mm2) - float(np.sum(pull))
+
+
+def press(clearance, cos, area_mm2, k, uv, sealed_area_mm2: float, force_n: float, cpap_kpa: float,
+          pull: np.ndarray | None = None) -> Pressed:
     """Equilibrium of a rim of K points (arrays (K,), uv (K, 2), all covered) under `force_n` N
-    of headgear and `cpap_kpa` over `sealed_area_mm2`; k (K,) kPa/mm normal stiffness."""
+    of headgear and `cpap_kpa` over `sealed_area_mm2`; k (K,) kPa/mm normal stiffness; `pull` (K,)
+    N the membrane's pulls (`pull_n`; None: no membrane)."""
     cos = np.maximum(cos, COS_MIN)
+    pull = np.zeros(len(clearance)) if pull is None else pull
     spring = k * area_mm2 * cos**2 * N_PER_KPA_MM2  # N/mm along the axis
     net = force_n - cpap_load_n(cpap_kpa, sealed_area_mm2)
     centre = (area_mm2 * cos) @ uv / (area_mm2 @ cos)  # the load's line of action: the contact band's centroid
     basis = np.column_stack([np.ones(len(clearance)), uv - centre])
     touch = float(clearance.min())
-    if net <= 0:
+    if force_n <= least_force_n(cpap_kpa, sealed_area_mm2, pull):
         along = touch - clearance
         return _pressed(along, cos, k, cpap_kpa, 0.0, np.zeros(2), lifted=True)
     ridge = 1e-9 * float(spring.sum()) * np.diag([0.0, *np.mean(uv**2, axis=0)])  # pins the tilt of a rim touching at one point
+    ease = ROOT_MM / cos  # mm along the axis: pressed this far in, a flap pulls no more
 
     def energy(x):
-        a = np.maximum(basis @ x - clearance, 0.0)
-        return 0.5 * spring @ a**2 - net * x[0] + 0.5 * x @ ridge @ x, basis.T @ (spring * a) - [net, 0, 0] + ridge @ x
+        a = basis @ x - clearance
+        on, eased = np.maximum(a, 0.0), np.clip(a, 0.0, ease)
+        flaps = -pull @ (np.minimum(a, 0.0) + eased - 0.5 * eased**2 / ease)
+        force = spring * on - pull * (1.0 - eased / ease)
+        return 0.5 * spring @ on**2 + flaps - net * x[0] + 0.5 * x @ ridge @ x, basis.T @ force - [net, 0, 0] + ridge @ x
 
     def hessian(x):
-        on = basis @ x > clearance
-        return (basis[on].T * spring[on]) @ basis[on] + ridge
+        a = basis @ x - clearance
+        stiff = np.where(a > 0, spring, 0.0) + np.where((a > 0) & (a < ease), pull / ease, 0.0)
+        return (basis.T * stiff) @ basis + ridge
 
     x = minimize(energy, np.array([touch, 0.0, 0.0]), jac=True, hess=hessian, method="trust-exact",
                  options={"gtol": 1e-9 * max(net, 1.0)}).x

@@ -44,6 +44,7 @@ LIFT = 0.1  # and rises away from the skin by this slope at rest
 LARGE = 0.22  # large deflection: the drop falls short by this share of drop / a (fitted to the finite elements)
 RUN = 17  # a width holds only where it holds over this many rim points running (a grey opening)
 FACING = -0.8  # a sheet's other side: its normal and the face's meet at cos below this
+ROOT_SHARE = 0.70  # of the air's push on a flap's span, what its root takes (finite elements at no opening: 0.69-0.72)
 
 
 def face_thickness_mm(mesh: trimesh.Trimesh) -> np.ndarray:
@@ -79,11 +80,40 @@ def reach_mm(width_mm: np.ndarray, thickness: np.ndarray, cpap_kpa: float) -> np
     the skin (module docstring; 0 where there is no membrane: width 0)."""
     width = np.asarray(width_mm, dtype=float)
     thick = np.where(width > 0, thickness, 1.0)
-    free = np.maximum(width - BAND_MM + thick, 0.0)  # a: from the root to where it lies
-    drop = cpap_kpa * free**4 / (72.0 * bending_stiffness(thick))
-    bent = np.minimum(drop / np.maximum(free, 1e-9), 0.5 / LARGE)  # drop / a, held where the law would turn back
-    laid = drop * (1.0 - LARGE * bent) - LIFT * free / 3.0 - ROOT_MM
+    laid = _laid_mm(_free_mm(width, thick), thick, cpap_kpa)
     return np.where(width > 0, np.clip(laid, 0.0, np.maximum(width - BAND_MM, 0.0)), 0.0)
+
+
+def _free_mm(width: np.ndarray, thickness: np.ndarray) -> np.ndarray:
+    """(K,) mm: the longest span a of a flap that still lies BAND_MM on the skin."""
+    return np.maximum(width - BAND_MM + thickness, 0.0)
+
+
+def _laid_mm(span: np.ndarray, thickness: np.ndarray, cpap_kpa: float) -> np.ndarray:
+    """(K,) mm: the opening at which `cpap_kpa` lays flaps (K,) `thickness` mm thick on the skin
+    `span` (K,) mm from their roots (module docstring; negative: short of the wall's touch)."""
+    drop = cpap_kpa * span**4 / (72.0 * bending_stiffness(thickness))
+    bent = np.minimum(drop / np.maximum(span, 1e-9), 0.5 / LARGE)  # drop / a, held where the law would turn back
+    return drop * (1.0 - LARGE * bent) - LIFT * span / 3.0 - ROOT_MM
+
+
+def root_pull_kpa_mm(width_mm: np.ndarray, thickness: np.ndarray, cpap_kpa: float, iterations: int = 48) -> np.ndarray:
+    """(K,) kPa mm per mm of rim: how hard each flap's root pulls the wall towards the skin where
+    the wall stands at it: ROOT_SHARE of the air's push `cpap_kpa` on the span the flap bridges from
+    its root (ROOT_MM up, rising by LIFT) to where it lies, the span a at which the reach's law lays
+    it at no opening (bisection). 0 where there is no flap or it does not lie BAND_MM on the skin
+    (no seal: the air is on both sides of it)."""
+    width = np.asarray(width_mm, dtype=float)
+    thick = np.where(width > 0, thickness, 1.0)
+    free = _free_mm(width, thick)
+    lies = (width > 0) & (_laid_mm(free, thick, cpap_kpa) >= 0.0)
+    lo = np.minimum((LIFT * 72.0 * bending_stiffness(thick) / (12.0 * cpap_kpa)) ** (1.0 / 3.0), free)  # the law's least
+    hi = free.copy()
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        short = _laid_mm(mid, thick, cpap_kpa) < 0.0
+        lo, hi = np.where(short, mid, lo), np.where(short, hi, mid)
+    return np.where(lies, ROOT_SHARE * cpap_kpa * hi, 0.0)
 
 
 def width_for(reach: np.ndarray, thickness_mm: float, cpap_kpa: float, tol_mm: float = 1e-9) -> np.ndarray:
