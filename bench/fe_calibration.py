@@ -14,7 +14,9 @@
    opening at which the flap still lies BAND_MM on the skin (`sealed_opening`), as designed (its
    root's stand-off and rest lift) and flat, on a rigid skin and on the softest region's, beside the
    fast model's `reach_mm`, the same law for a flat flap, and a free cantilever's tip deflection,
-   min(w - BAND_MM, P w^4 / (8 D)); nan where Newton's iterations fail.
+   min(w - BAND_MM, P w^4 / (8 D)); and how hard the designed flap's root pulls its wall towards the
+   skin at no opening (`root_pull`) beside the fast model's `root_pull_kpa_mm`; nan where Newton's
+   iterations fail.
 
 Usage: .venv/bin/python bench/fe_calibration.py [--seeds 6] [--first 8000] [--model NPZ | --model shipped]
        [--membrane [--widths MM ...] [--thickness MM]]
@@ -33,10 +35,10 @@ from cpapfit.cushion.nurbs import CushionParams
 from cpapfit.errors import CpapfitError
 from cpapfit.cushion.envelope import THINNEST_MM
 from cpapfit.cushion.nurbs import MEMBRANE_LIFT, MEMBRANE_ROOT_MM
-from cpapfit.evaluation.calibration import sealed_opening, section_stiffness, strip_stiffness
+from cpapfit.evaluation.calibration import root_pull, sealed_opening, section_stiffness, strip_stiffness
 from cpapfit.evaluation.fe_membrane import Flap, NotConverged
 from cpapfit.evaluation.fit import KPA_PER_CMH2O
-from cpapfit.evaluation.membrane import BAND_MM, bending_stiffness, reach_mm
+from cpapfit.evaluation.membrane import BAND_MM, bending_stiffness, reach_mm, root_pull_kpa_mm
 from cpapfit.evaluation.fe_checks import all_checks
 from cpapfit.evaluation.tissue import REGIONS, TissueModel
 from cpapfit.ict import load_ict
@@ -85,6 +87,15 @@ def sealed_or_none(flap: Flap, cpap_kpa: float, spring: float | None = None) -> 
         return np.nan, np.nan
 
 
+def pull_or_nan(flap: Flap, cpap_kpa: float) -> float:
+    """`root_pull` (kPa mm) of a flap that lies BAND_MM on a rigid skin at no opening; nan where it lies less or Newton fails."""
+    try:
+        pull, lying = root_pull(flap, cpap_kpa)
+    except NotConverged:
+        return np.nan
+    return pull if lying >= BAND_MM else np.nan
+
+
 def membrane_table(widths: tuple[float, ...], thickness: float = FLAP_MM) -> None:
     """The membrane's sealed opening by finite elements beside the fast model's reach (module docstring),
     for flaps `widths` mm wide and `thickness` mm thick."""
@@ -94,7 +105,7 @@ def membrane_table(widths: tuple[float, ...], thickness: float = FLAP_MM) -> Non
           f"band {BAND_MM:g} mm; designed: root {MEMBRANE_ROOT_MM[1]:g} mm off the skin, rest lift {MEMBRANE_LIFT:g}; "
           f"soft skin {soft[2]:.2f} kPa/mm (the softest region's spring)\n")
     print("| width (mm) | CPAP (cmH2O) | free cantilever | reach_mm | FE designed, rigid | law, flat flap | FE flat, rigid "
-          "| FE flat, soft | lies at no opening, designed (mm) |\n|---|---|---|---|---|---|---|---|---|")
+          "| FE flat, soft | lies at no opening, designed (mm) | root's pull, FE / law (kPa mm per mm) |\n|---|---|---|---|---|---|---|---|---|---|")
     for width in widths:
         for cmh2o in CPAP_CMH2O:
             p = cmh2o * KPA_PER_CMH2O
@@ -105,8 +116,9 @@ def membrane_table(widths: tuple[float, ...], thickness: float = FLAP_MM) -> Non
             rigid, soft_g = sealed_or_none(flat, p)[0], sealed_or_none(flat, p, soft[2])[0]
             lifted, lies = sealed_or_none(designed, p)
             law = float(reach_mm(np.array([width]), np.array([thickness]), p)[0])
+            pull = float(root_pull_kpa_mm(np.array([width]), np.array([thickness]), p)[0])
             print(f"| {width:g} | {cmh2o:g} | {cantilever:.2f} | {law:.2f} | {lifted:.2f} | {laid_flat:.2f} | {rigid:.2f} | {soft_g:.2f} "
-                  f"| {lies:.2f} |", flush=True)
+                  f"| {lies:.2f} | {pull_or_nan(designed, p):.2f} / {pull:.2f} |", flush=True)
 
 
 def main() -> None:

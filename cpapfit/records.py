@@ -11,7 +11,7 @@ from .cushion.envelope import PEAK_MARGIN_KPA
 from .evaluation.fe import SILICONE_KPA, SILICONE_POISSON
 from .evaluation.fit import FitParams
 from .evaluation.leak import AIR_DENSITY_KG_M3, AIR_VISCOSITY_PA_S, DISCHARGE_COEFFICIENT
-from .evaluation.membrane import BAND_MM, LARGE, LIFT, MEMBRANE_MAX_MM, ROOT_MM
+from .evaluation.membrane import BAND_MM, LARGE, LIFT, MEMBRANE_MAX_MM, ROOT_MM, ROOT_SHARE
 from .evaluation.states import AWAKE
 from .fabrication.frame import BORE_MM, CONE_MM, CONE_TAPER, GAUGE_PLANE_MM, VALVE_MM, cone_diameter_mm
 from .io.landmarks import landmarks_record
@@ -82,8 +82,12 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
             "model": "a flap thinner than the wall (found on the cushion mesh by its thickness) closes the seal opening at a rim "
                      "point up to its reach, the largest opening at which the CPAP pressure still lays it band_mm on the skin: "
                      "d (1 - large d / a) - lift a / 3 - root_mm, d = P a^4 / (72 D), a = w - band_mm + t, D = E t^3 / (12 (1 - nu^2)) "
-                     "(the clamped plate laid on the skin, fitted to finite elements), at most w - band_mm; none where the mask lifts off",
-            "band_mm": BAND_MM, "large": LARGE, "lift": LIFT, "root_mm": ROOT_MM, "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
+                     "(the clamped plate laid on the skin, fitted to finite elements), at most w - band_mm; none where the mask lifts off. "
+                     "Where its wall stands at the skin or off it (easing to none pressed root_mm in), a flap's root pulls the wall "
+                     "towards the skin by root_share of the air's push on the span a it bridges to where it lies at no opening "
+                     "(root_share P a, per mm of rim, fitted to finite elements), so the headgear holds the CPAP load less those pulls",
+            "band_mm": BAND_MM, "large": LARGE, "lift": LIFT, "root_mm": ROOT_MM, "root_share": ROOT_SHARE,
+            "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
         },
     }
 

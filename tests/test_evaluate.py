@@ -8,7 +8,8 @@ from scipy.spatial import Delaunay
 from cpapfit.errors import InputError
 from cpapfit.evaluation.fit import FitParams, fit_rim
 from cpapfit.evaluation.leak import leak_l_min
-from cpapfit.evaluation.mechanics import press
+from cpapfit.evaluation.mechanics import least_force_n, press
+from cpapfit.evaluation.membrane import ROOT_MM
 from cpapfit.evaluation.rim import find_rim, _nearest_skin, _skin_below, _skin_planes
 from cpapfit.evaluation.tissue import stiffness
 from cpapfit.pipeline import face_for
@@ -410,3 +411,21 @@ def test_a_point_cloud_too_sparse_for_the_rim_is_refused_in_words():
     axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
     with pytest.raises(InputError, match="4.0 mm apart, too sparse .* export a denser cloud, or a mesh"):
         find_rim(ring, trimesh.PointCloud(flat), trimesh.Trimesh(flat, Delaunay(grid).simplices), axis, up)
+
+
+def test_a_membranes_pull_holds_a_mask_on_past_the_cpap_load_and_balances_what_the_skin_does_not_take():
+    """Flaps pulling 2 N in all on a flat rim under 2.8 N of CPAP load: 2.3 N of headgear holds it on
+    (without them it lifts off), the wall pressed in under ROOT_MM where the pulls ease off; the
+    skin's push is the headgear's and the pulls' less the CPAP load (within 1e-6 N); under the
+    least force (0.8 N) the mask lifts off."""
+    cpap, area = 1.0, np.pi * RING_MM**2
+    pull = np.full(K, 2.0 / K)
+    args = (np.zeros(K), np.ones(K), np.full(K, AREA), np.full(K, 1.0), ring_uv(), area)
+    assert least_force_n(cpap, area, pull) == pytest.approx(cpap * area * 1e-3 - 2.0)
+    held = press(*args, 2.3, cpap, pull)
+    assert not held.lifted and press(*args, 2.3, cpap).lifted
+    indent = held.pressure_kpa / 1.0  # mm, k = 1 kPa/mm, cos = 1
+    assert 0 < indent.max() < ROOT_MM
+    skin = held.pressure_kpa @ np.full(K, AREA) * 1e-3
+    assert skin == pytest.approx(2.3 - cpap * area * 1e-3 + pull @ (1 - indent / ROOT_MM), abs=1e-6)
+    assert press(*args, 0.75, cpap, pull).lifted

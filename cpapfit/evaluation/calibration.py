@@ -115,3 +115,13 @@ def sealed_opening(flap: Flap, cpap_kpa: float, band_mm: float, spring: float = 
         x = model.lowered(x, cpap_kpa, skin_y - before[0], skin_y - opening, spring)
         lying = model.pressed(x, cpap_kpa, skin_y - opening, spring).lying_mm(cpap_kpa)
     return float(np.interp(band_mm, [lying, before[1]], [opening, before[0]])), closed
+
+
+def root_pull(flap: Flap, cpap_kpa: float, spring: float = RIGID_KPA_PER_MM) -> tuple[float, float]:
+    """(kPa mm, mm): how hard the `flap`'s root holds it off the skin per unit depth (its share of the
+    air's push, which pulls the wall towards the skin) with its wall at the skin, inflated by
+    `cpap_kpa`, and how far it lies on the skin then."""
+    model = FlapModel(flap)
+    skin_y = -flap.standoff_mm
+    solved = model.pressed(inflate(model, cpap_kpa, skin_y, spring), cpap_kpa, skin_y, spring)
+    return solved.root_reaction[1], solved.lying_mm(cpap_kpa)
