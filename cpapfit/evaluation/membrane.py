@@ -22,6 +22,12 @@ flaps 3-8 mm wide where they converge. A 5 mm flap at 10 cmH2O
 closes nothing; a 10 mm one 4.1 mm. Where the wall is pushed off the face altogether (the CPAP load
 beats the headgear), nothing holds.
 
+The flap also pulls its wall towards the skin: between its root and where it lies it spans the
+air, and its root takes ROOT_SHARE of the air's push on that span (the rest bears on the skin where
+it touches down; the finite elements of the designed flap with its wall at the skin, within 2 %,
+`calibration.root_pull`). `root_pull_kpa_mm` is that pull per mm of rim, with the span at which the
+law above lays the flap at no opening; `mechanics.press` takes it off the CPAP load.
+
 The membrane is found on any closed cushion mesh by its thickness (`face_thickness_mm`): faces whose opposite
 side lies within MEMBRANE_MAX_MM inwards and faces back at them (a sheet's two sides, not the cap
 across a wall's end); a designed wall is at least 1.9 mm thick everywhere.
