@@ -8,7 +8,7 @@ from scipy.spatial import Delaunay
 from cpapfit.errors import InputError
 from cpapfit.evaluation.fit import FitParams, fit_rim
 from cpapfit.evaluation.leak import leak_l_min
-from cpapfit.evaluation.mechanics import least_force_n, press
+from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
 from cpapfit.evaluation.membrane import ROOT_MM
 from cpapfit.evaluation.rim import find_rim, _nearest_skin, _skin_below, _skin_planes
 from cpapfit.evaluation.tissue import stiffness
@@ -414,18 +414,41 @@ def test_a_point_cloud_too_sparse_for_the_rim_is_refused_in_words():
 
 
 def test_a_membranes_pull_holds_a_mask_on_past_the_cpap_load_and_balances_what_the_skin_does_not_take():
-    """Flaps pulling 2 N in all on a flat rim under 2.8 N of CPAP load: 2.3 N of headgear holds it on
-    (without them it lifts off), the wall pressed in under ROOT_MM where the pulls ease off; the
-    skin's push is the headgear's and the pulls' less the CPAP load (within 1e-6 N); under the
-    least force (0.8 N) the mask lifts off."""
-    cpap, area = 1.0, np.pi * RING_MM**2
+    """Flaps pulling 2 N in all, evenly, on a flat rim (skin at cos 0.8) under 2.8 N of CPAP load,
+    each closing openings up to 1 mm: held on from 1 mN past the least force, the CPAP load less the
+    whole pull (without the flaps, or with flaps that close no opening, it lifts off), lifted 1 mN
+    short of it; the wall pressed in under ROOT_MM (normal) where the pulls ease off, and the skin's
+    push along the axis is the headgear's and the pulls' less the CPAP load (within 1e-6 N)."""
+    cpap, area, cos = 1.0, np.pi * RING_MM**2, 0.8
     pull = np.full(K, 2.0 / K)
-    args = (np.zeros(K), np.ones(K), np.full(K, AREA), np.full(K, 1.0), ring_uv(), area)
-    assert least_force_n(cpap, area, pull) == pytest.approx(cpap * area * 1e-3 - 2.0)
-    held = press(*args, 2.3, cpap, pull)
-    assert not held.lifted and press(*args, 2.3, cpap).lifted
-    indent = held.pressure_kpa / 1.0  # mm, k = 1 kPa/mm, cos = 1
+    flaps = Flaps(pull, np.full(K, 1.0))
+    args = (np.zeros(K), np.full(K, cos), np.full(K, AREA), np.full(K, 1.0), ring_uv(), area)
+    least = least_force_n(*args[1:3], ring_uv(), area, cpap, pull)
+    assert least == pytest.approx(cpap * area * 1e-3 - 2.0, abs=1e-9)
+    held = press(*args, least + 1e-3, cpap, flaps)
+    assert not held.lifted and press(*args, least - 1e-3, cpap, flaps).lifted
+    assert press(*args, least + 1e-3, cpap).lifted and press(*args, least + 1e-3, cpap, Flaps(pull, np.zeros(K))).lifted
+    indent = held.pressure_kpa / 1.0  # mm normal to the skin, k = 1 kPa/mm
     assert 0 < indent.max() < ROOT_MM
-    skin = held.pressure_kpa @ np.full(K, AREA) * 1e-3
-    assert skin == pytest.approx(2.3 - cpap * area * 1e-3 + pull @ (1 - indent / ROOT_MM), abs=1e-6)
-    assert press(*args, 0.75, cpap, pull).lifted
+    skin = held.pressure_kpa @ np.full(K, AREA * cos) * 1e-3
+    assert skin == pytest.approx(least + 1e-3 - cpap * area * 1e-3 + pull @ (1 - indent / ROOT_MM), abs=1e-6)
+
+
+def test_pulls_on_one_side_hold_the_mask_on_only_as_far_as_it_cannot_tip_off_over_the_other():
+    """The same 2 N of pull only where u > 15 mm (a sixth of the rim): the mask would tip off about
+    the rim's edge beside the pulls, its other side lifting, before it slid off, so the least force is
+    the CPAP load less the pulls' moment about that edge over the load's (about 0.34 N held, not 2;
+    within 2 %: the edge is a chord of the 256 points): 1 mN short of it the mask lifts off; 0.3 N
+    past it it stays on, tilted under 0.05 (the far side lifted, every opening within the flaps'
+    2 mm reach)."""
+    cpap, area, uv = 1.0, np.pi * RING_MM**2, ring_uv()
+    side = uv[:, 0] > 15.0
+    pull = np.where(side, 2.0 / side.sum(), 0.0)
+    flaps = Flaps(pull, np.full(K, 2.0))
+    args = (np.zeros(K), np.ones(K), np.full(K, AREA), np.full(K, 1.0), uv, area)
+    least = least_force_n(*args[1:3], uv, area, cpap, pull)
+    tip = pull @ (RING_MM - uv[:, 0]) / RING_MM  # about the edge at u = 30 mm, the load's line at the centre
+    assert cpap * area * 1e-3 - least == pytest.approx(tip, rel=0.02)
+    assert press(*args, least - 1e-3, cpap, flaps).lifted
+    held = press(*args, least + 0.3, cpap, flaps)
+    assert not held.lifted and 0 < held.tilt[0] < 0.05 and held.opening_mm.max() <= 2.0

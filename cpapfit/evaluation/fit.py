@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 from ..frozen import freeze_arrays
 from ..template import load_template
 from .leak import leak_l_min
-from .mechanics import COS_MIN, N_PER_KPA_MM2, Pressed, cpap_load_n, least_force_n, press, pull_n
+from .mechanics import COS_MIN, N_PER_KPA_MM2, Flaps, Pressed, cpap_load_n, least_force_n, press, pull_n
 from .membrane import reach_mm, root_pull_kpa_mm
 from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
@@ -113,22 +113,25 @@ def _least_median_most(values: np.ndarray) -> list[float]:
     return np.percentile(values, [0, 50, 100]).round(3).tolist() if len(values) else [0.0, 0.0, 0.0]
 
 
-def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float) -> Pressed:
-    """`press` over the covered points of a rim, its membrane pulling."""
+def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float,
+               flaps: Flaps | None = None) -> Pressed:
+    """`press` over the covered points of a rim with its membrane (`flaps`: `_flaps(rim, cpap_kpa)`, given or made)."""
     c = rim.covered
     return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa,
-                 _pull(rim, cpap_kpa))
+                 _flaps(rim, cpap_kpa) if flaps is None else flaps)
 
 
-def _pull(rim: RimContact, cpap_kpa: float) -> np.ndarray:
-    """(covered,) N: the membrane's pull at each covered rim point (`mechanics.pull_n`)."""
+def _flaps(rim: RimContact, cpap_kpa: float) -> Flaps:
+    """The membrane at the covered rim points: each flap's pull (`mechanics.pull_n`) and reach."""
     c = rim.covered
-    return pull_n(root_pull_kpa_mm(rim.membrane_mm[c], rim.membrane_thickness_mm[c], cpap_kpa), rim.ds[c], rim.cos[c])
+    width, thickness = rim.membrane_mm[c], rim.membrane_thickness_mm[c]
+    return Flaps(pull_n(root_pull_kpa_mm(width, thickness, cpap_kpa), rim.ds[c], rim.cos[c]), reach_mm(width, thickness, cpap_kpa))
 
 
-def _least_force(rim: RimContact, cpap_kpa: float) -> float:
-    """N: the least headgear force that holds this rim on (`mechanics.least_force_n`)."""
-    return least_force_n(cpap_kpa, rim.sealed_area_mm2, _pull(rim, cpap_kpa))
+def _least_force(rim: RimContact, width_mm: float, cpap_kpa: float, flaps: Flaps) -> float:
+    """N: the least headgear force that holds this rim on (`mechanics.least_force_n`), at least 0."""
+    c = rim.covered
+    return max(least_force_n(rim.cos[c], width_mm * rim.ds[c], rim.uv[c], rim.sealed_area_mm2, cpap_kpa, flaps.pull_n), 0.0)
 
 
 def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray:
@@ -143,24 +146,28 @@ def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray
 def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
     """Least headgear force (N) at which no covered rim point is left open (bisection), or None."""
 
+    flaps = _flaps(rim, params.cpap_kpa)
+
     def opened(force: float) -> bool:
-        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa), rim, params.cpap_kpa).max() > 0
+        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps), rim, params.cpap_kpa).max() > 0
 
     if opened(params.max_force_n):
         return None
-    return _bisected(opened, _least_force(rim, params.cpap_kpa), params.max_force_n, tol_n)[1]
+    return _bisected(opened, _least_force(rim, width_mm, params.cpap_kpa, flaps), params.max_force_n, tol_n)[1]
 
 
 def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, peak_kpa: float, tol_n: float = 0.01) -> float:
     """Most headgear force (N, up to `params.max_force_n`) at which no covered rim point presses
-    harder than `peak_kpa` (bisection: the pressure grows with the force); the CPAP load's own
-    force where even the least contact presses harder."""
+    harder than `peak_kpa` (bisection: the pressure grows with the force); the least force that
+    holds the mask on where even the least contact presses harder."""
+    flaps = _flaps(rim, params.cpap_kpa)
+
     def over(force: float) -> bool:
-        return _press_rim(rim, k, width_mm, force, params.cpap_kpa).pressure_kpa.max() > peak_kpa
+        return _press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps).pressure_kpa.max() > peak_kpa
 
     if not over(params.max_force_n):
         return params.max_force_n
-    return _bisected(lambda force: not over(force), _least_force(rim, params.cpap_kpa), params.max_force_n, tol_n)[0]
+    return _bisected(lambda force: not over(force), _least_force(rim, width_mm, params.cpap_kpa, flaps), params.max_force_n, tol_n)[0]
 
 
 def _bisected(below: Callable[[float], bool], lo: float, hi: float, tol_n: float) -> tuple[float, float]:

@@ -9,8 +9,9 @@ The headgear force F (N) pushes along the axis through the centroid of the conta
 through the same line. A membrane flap pulls its wall towards the skin by its root's share of the
 air's push on the span it bridges to the skin (`membrane.root_pull_kpa_mm`): the pull q_i (N, along
 the axis) where the wall stands at the skin or off it, easing to none once the wall is pressed
-ROOT_MM into it (its root is down on the skin then, and the flap lies on the skin from there). The
-equilibrium minimises the convex energy
+ROOT_MM into it (its root is down on the skin then, and the flap lies on the skin from there),
+and none where the flap no longer closes the opening (`press`). The equilibrium minimises the
+convex energy
     sum_i [1/2 k_i A_i cos_i^2 max(a_i, 0)^2 + V_i(a_i)] - (F - P * sealed area) * d,
 V_i' = -q_i min(max(1 - a_i cos_i / ROOT_MM, 0), 1), i.e. force balance along the axis and moment
 balance about the two axes across it; with no contact at all the pulls must hold the mask on
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
+from scipy.spatial import ConvexHull
 
 from ..frozen import freeze_arrays
 from .membrane import ROOT_MM
@@ -34,7 +36,8 @@ N_PER_KPA_MM2 = 1e-3
 class Pressed:
     """The mask at equilibrium: shift_mm along the axis (from first touch), tilt (2,) slopes;
     pressure_kpa (K,) contact pressure on the skin; opening_mm (K,) seal opening (0: closed);
-    lifted: the CPAP load exceeds the headgear force (no contact can hold)."""
+    lifted: the CPAP load, less what the membrane's pulls can hold, exceeds the headgear force, or
+    tips the mask off about an edge of the rim (no contact can hold)."""
 
     shift_mm: float
     tilt: np.ndarray
@@ -47,7 +50,7 @@ class Pressed:
 
 
 def cpap_load_n(cpap_kpa: float, sealed_area_mm2: float) -> float:
-    """N: the CPAP pressure's push on the area a rim seals (mm^2), the least force that holds the mask on."""
+    """N: the CPAP pressure's push on the area a rim seals (mm^2)."""
     return cpap_kpa * sealed_area_mm2 * N_PER_KPA_MM2
 
 
@@ -57,25 +60,65 @@ def pull_n(pull_kpa_mm: np.ndarray, ds: np.ndarray, cos: np.ndarray) -> np.ndarr
     return pull_kpa_mm * ds * np.maximum(cos, COS_MIN) * N_PER_KPA_MM2
 
 
-def least_force_n(cpap_kpa: float, sealed_area_mm2: float, pull: np.ndarray) -> float:
-    """N: the least headgear force that holds a mask on: the CPAP load on `sealed_area_mm2` less the
-    flaps' whole pull (K,) N (`pull_n`)."""
-    return cpap_load_n(cpap_kpa, sealed_area_mm2) - float(np.sum(pull))
+def least_force_n(cos, area_mm2, uv, sealed_area_mm2: float, cpap_kpa: float, pull: np.ndarray) -> float:
+    """N: the least headgear force that holds a rim on (arguments as `press`'s; `pull` (K,) N): the
+    CPAP load less the most the flaps' pulls hold against it, off the skin, about any edge of the
+    rim's convex hull the mask could tip over (sum_i q_i d_i / d_c, d the distances inside the edge
+    of each point and of the load's line of action); pulls even around the rim hold their whole sum."""
+    if not np.any(pull):
+        return cpap_load_n(cpap_kpa, sealed_area_mm2)
+    centre = _centre(cos, area_mm2, uv)
+    hull = ConvexHull(uv).equations  # (E, 3): unit normal out of the hull, offset
+    inside = -(uv @ hull[:, :2].T + hull[:, 2])  # (K, E) mm inside each edge
+    held = (pull @ inside) / -(hull[:, :2] @ centre + hull[:, 2])
+    return cpap_load_n(cpap_kpa, sealed_area_mm2) - float(held.min())
+
+
+def _centre(cos, area_mm2, uv) -> np.ndarray:
+    """(2,) mm: the load's line of action, the contact band's centroid (weighted by area |cos|)."""
+    cos = np.maximum(cos, COS_MIN)
+    return (area_mm2 * cos) @ uv / (area_mm2 @ cos)
+
+
+@dataclass(frozen=True)
+class Flaps:
+    """The membrane at K rim points as the mechanics takes it: pull_n (K,) N along the axis
+    (`pull_n`), reach_mm (K,) mm the seal opening each flap closes (`membrane.reach_mm`)."""
+
+    pull_n: np.ndarray
+    reach_mm: np.ndarray
+
+    def __post_init__(self):
+        freeze_arrays(self)
 
 
 def press(clearance, cos, area_mm2, k, uv, sealed_area_mm2: float, force_n: float, cpap_kpa: float,
-          pull: np.ndarray | None = None) -> Pressed:
+          flaps: Flaps | None = None) -> Pressed:
     """Equilibrium of a rim of K points (arrays (K,), uv (K, 2), all covered) under `force_n` N
-    of headgear and `cpap_kpa` over `sealed_area_mm2`; k (K,) kPa/mm normal stiffness; `pull` (K,)
-    N the membrane's pulls (`pull_n`; None: no membrane)."""
+    of headgear and `cpap_kpa` over `sealed_area_mm2`; k (K,) kPa/mm normal stiffness; `flaps` the
+    membrane (None: none). A flap pulls only while it closes its point's opening: an equilibrium
+    that opens a point past its flap's reach is found again without that pull (the flap no longer
+    seals there, so the air is on both sides of it), until none does."""
+    pull = np.zeros(len(clearance)) if flaps is None else flaps.pull_n
+    while True:
+        pressed = _equilibrium(clearance, cos, area_mm2, k, uv, sealed_area_mm2, force_n, cpap_kpa, pull)
+        if pressed.lifted or flaps is None:
+            return pressed
+        sealing = np.where(pressed.opening_mm <= flaps.reach_mm, pull, 0.0)
+        if np.array_equal(sealing, pull):
+            return pressed
+        pull = sealing
+
+
+def _equilibrium(clearance, cos, area_mm2, k, uv, sealed_area_mm2, force_n, cpap_kpa, pull) -> Pressed:
+    """`press` with every pull (K,) N held (module docstring)."""
+    lifted = force_n <= least_force_n(cos, area_mm2, uv, sealed_area_mm2, cpap_kpa, pull)
     cos = np.maximum(cos, COS_MIN)
-    pull = np.zeros(len(clearance)) if pull is None else pull
     spring = k * area_mm2 * cos**2 * N_PER_KPA_MM2  # N/mm along the axis
     net = force_n - cpap_load_n(cpap_kpa, sealed_area_mm2)
-    centre = (area_mm2 * cos) @ uv / (area_mm2 @ cos)  # the load's line of action: the contact band's centroid
-    basis = np.column_stack([np.ones(len(clearance)), uv - centre])
+    basis = np.column_stack([np.ones(len(clearance)), uv - _centre(cos, area_mm2, uv)])
     touch = float(clearance.min())
-    if force_n <= least_force_n(cpap_kpa, sealed_area_mm2, pull):
+    if lifted:
         along = touch - clearance
         return _pressed(along, cos, k, cpap_kpa, 0.0, np.zeros(2), lifted=True)
     ridge = 1e-9 * float(spring.sum()) * np.diag([0.0, *np.mean(uv**2, axis=0)])  # pins the tilt of a rim touching at one point

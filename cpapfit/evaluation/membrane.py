@@ -24,7 +24,7 @@ beats the headgear), nothing holds.
 
 The flap also pulls its wall towards the skin: between its root and where it lies it spans the
 air, and its root takes ROOT_SHARE of the air's push on that span (the rest bears on the skin where
-it touches down; the finite elements of the designed flap with its wall at the skin, within 2 %,
+it touches down; the finite elements of the designed flap with its wall at the skin, within 3 %,
 `calibration.root_pull`). `root_pull_kpa_mm` is that pull per mm of rim, with the span at which the
 law above lays the flap at no opening; `mechanics.press` takes it off the CPAP load.
 
@@ -50,7 +50,7 @@ LIFT = 0.1  # and rises away from the skin by this slope at rest
 LARGE = 0.22  # large deflection: the drop falls short by this share of drop / a (fitted to the finite elements)
 RUN = 17  # a width holds only where it holds over this many rim points running (a grey opening)
 FACING = -0.8  # a sheet's other side: its normal and the face's meet at cos below this
-ROOT_SHARE = 0.70  # of the air's push on a flap's span, what its root takes (finite elements at no opening: 0.69-0.72)
+ROOT_SHARE = 0.70  # of the air's push on a flap's span, what its root takes (finite elements at no opening: 0.69-0.72, within 3 %)
 
 
 def face_thickness_mm(mesh: trimesh.Trimesh) -> np.ndarray:
@@ -111,6 +111,8 @@ def root_pull_kpa_mm(width_mm: np.ndarray, thickness: np.ndarray, cpap_kpa: floa
     (no seal: the air is on both sides of it)."""
     width = np.asarray(width_mm, dtype=float)
     thick = np.where(width > 0, thickness, 1.0)
+    if cpap_kpa <= 0:
+        return np.zeros(width.shape)
     free = _free_mm(width, thick)
     lies = (width > 0) & (_laid_mm(free, thick, cpap_kpa) >= 0.0)
     lo = np.minimum((LIFT * 72.0 * bending_stiffness(thick) / (12.0 * cpap_kpa)) ** (1.0 / 3.0), free)  # the law's least
