@@ -85,7 +85,8 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
                      "(the clamped plate laid on the skin, fitted to finite elements), at most w - band_mm; none where the mask lifts off. "
                      "Where its wall stands at the skin or off it (easing to none pressed root_mm in), a flap's root pulls the wall "
                      "towards the skin by root_share of the air's push on the span a it bridges to where it lies at no opening "
-                     "(root_share P a, per mm of rim, fitted to finite elements), so the headgear holds the CPAP load less those pulls",
+                     "(root_share P a, per mm of rim, fitted to finite elements) while it closes the opening there, so the "
+                     "headgear holds the CPAP load less those pulls",
             "band_mm": BAND_MM, "large": LARGE, "lift": LIFT, "root_mm": ROOT_MM, "root_share": ROOT_SHARE,
             "max_thickness_mm": MEMBRANE_MAX_MM, "youngs_kpa": SILICONE_KPA, "poisson": SILICONE_POISSON,
         },
