@@ -19,8 +19,8 @@ at least 0 and at most w - BAND_MM (an inextensible flap hanging to the skin): w
 the finite elements for 0.5 mm flaps 3-10 mm wide at 4-20 cmH2O (LARGE = 0.22 fitted to them; a
 10 mm flap at 20 cmH2O hangs to the skin, where they do not converge), within 0.15 mm for 0.3 mm
 flaps 3-8 mm wide where they converge. A 5 mm flap at 10 cmH2O
-closes nothing; a 10 mm one 4.1 mm. Where the wall is pushed off the face altogether (the CPAP load
-beats the headgear), nothing holds.
+closes nothing; a 10 mm one 4.1 mm. Where the wall is pushed off the face altogether (the CPAP load,
+less what the roots pull below, beats the headgear, `mechanics.least_force_n`), nothing holds.
 
 The flap also pulls its wall towards the skin: between its root and where it lies it spans the
 air, and its root takes ROOT_SHARE of the air's push on that span (the rest bears on the skin where
