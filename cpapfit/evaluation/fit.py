@@ -134,13 +134,12 @@ def _least_force(rim: RimContact, width_mm: float, cpap_kpa: float, flaps: Flaps
     return max(least_force_n(rim.cos[c], width_mm * rim.ds[c], rim.uv[c], rim.sealed_area_mm2, cpap_kpa, flaps.pull_n), 0.0)
 
 
-def _left_open(pressed: Pressed, rim: RimContact, cpap_kpa: float) -> np.ndarray:
-    """(covered,) mm of each covered rim point's seal opening that its membrane does not close (none
-    does where the mask is lifted off the face)."""
+def _left_open(pressed: Pressed, flaps: Flaps) -> np.ndarray:
+    """(covered,) mm of each covered rim point's seal opening that its membrane (`flaps`) does not
+    close (none does where the mask is lifted off the face)."""
     if pressed.lifted:
         return pressed.opening_mm
-    c = rim.covered
-    return np.maximum(pressed.opening_mm - reach_mm(rim.membrane_mm[c], rim.membrane_thickness_mm[c], cpap_kpa), 0.0)
+    return np.maximum(pressed.opening_mm - flaps.reach_mm, 0.0)
 
 
 def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, tol_n: float = 0.01) -> float | None:
@@ -149,7 +148,7 @@ def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     flaps = _flaps(rim, params.cpap_kpa)
 
     def opened(force: float) -> bool:
-        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps), rim, params.cpap_kpa).max() > 0
+        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps), flaps).max() > 0
 
     if opened(params.max_force_n):
         return None
@@ -229,9 +228,10 @@ def at_force(fit: CushionFit, force_n: float, params: FitParams = FitParams()) -
 
 def _fitted(rim: RimContact, k: Stiffness, width_mm: float, force_n: float, sealing: float | None, params: FitParams) -> CushionFit:
     """The `CushionFit` of a rim on springs `k` pressed at `force_n` N, its seal force `sealing`."""
-    pressed = _press_rim(rim, k.effective, width_mm, force_n, params.cpap_kpa)
+    flaps = _flaps(rim, params.cpap_kpa)
+    pressed = _press_rim(rim, k.effective, width_mm, force_n, params.cpap_kpa, flaps)
     c = rim.covered
-    opening = _left_open(pressed, rim, params.cpap_kpa)
+    opening = _left_open(pressed, flaps)
     leak = leak_l_min(opening, rim.ds[c], width_mm, params.cpap_kpa)
     full = [_spread(c, a) for a in (pressed.pressure_kpa, opening, leak)]
     return CushionFit(rim, k, *full, pressed, force_n, sealing, width_mm, params.window_kpa)
