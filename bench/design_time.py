@@ -12,12 +12,17 @@ in turn by that tree, by this one, and by this one with `--stock none` (no stock
 each run from a scratch folder with its tree first on PYTHONPATH, and each case's medians and
 their ratios to the other tree's are printed.
 
-Usage: .venv/bin/python bench/design_time.py [--repeat N] [--against DIR]
+With --stages, each case is designed once more with `--verbose` and the wall time of each stage
+the command reports is printed beside the whole (the stages run while a worker process seats the
+stock sizes, so a stage's time is its wall time on a shared machine, not its own cost).
+
+Usage: .venv/bin/python bench/design_time.py [--repeat N] [--against DIR] [--stages]
 """
 
 import argparse
 import os
 import platform
+import re
 import resource
 import statistics
 import subprocess
@@ -38,6 +43,12 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 def run(*args: str, tree: Path | None = None, cwd: str | None = None) -> tuple[float, float]:
     """(wall seconds, CPU seconds of the run's processes) of `cpapfit ARGS` (`tree`: that source tree first on PYTHONPATH)."""
+    wall, cpu, _ = run_logged(*args, tree=tree, cwd=cwd)
+    return wall, cpu
+
+
+def run_logged(*args: str, tree: Path | None = None, cwd: str | None = None) -> tuple[float, float, str]:
+    """`run`, and what the command wrote on stderr."""
     env = os.environ | {"PYTHONPATH": str(tree)} if tree else None
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -46,7 +57,15 @@ def run(*args: str, tree: Path | None = None, cwd: str | None = None) -> tuple[f
         sys.exit(f"cpapfit {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()}")
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), done.stderr
+
+
+def stages(name: str, scan: str, mask: str, out: str) -> None:
+    """One `--verbose` design of a case: each stage's wall seconds as the command reports them."""
+    wall, cpu, log = run_logged("design", scan, "--mask", mask, "--out", out, "--verbose")
+    timed = [re.match(r"^  (.+): ([0-9.]+) s$", line) for line in log.splitlines()]
+    shown = ", ".join(f"{m[1]} {float(m[2]):.2f}" for m in timed if m)
+    print(f"  {name} {mask} by stage (s): {shown}; whole {wall:.1f} s, CPU {cpu:.1f} s")
 
 
 def dense_mesh(path: Path) -> None:
@@ -85,6 +104,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--against", type=Path, default=None, help="another source tree to time the same cases with")
+    parser.add_argument("--stages", action="store_true", help="also each stage's wall time, from one --verbose run per case")
     args = parser.parse_args()
     repeat = args.repeat
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
@@ -108,6 +128,8 @@ def main() -> None:
                 print(f"cpapfit design {name} --mask {mask}: {wall:.1f} s (process start to exit), CPU {cpu:.1f} s, "
                       f"load {load:.1f}, peak memory so far {peak:.1f} GB")
             print(f"  {name} {mask}: best {min(walls):.1f} s, median {statistics.median(walls):.1f} s")
+            if args.stages:
+                stages(name, scan, mask, f"{tmp}/out")
 
 
 if __name__ == "__main__":

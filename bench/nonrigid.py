@@ -1,11 +1,10 @@
 """Non-rigid registration: accuracy on synthetic subjects, speed and memory on a full 640x480
-capture, and trimesh's nricp_amberg on the same pair.
+capture, and the error over holes. Against trimesh's nricp_amberg: bench/speed.py.
 
 Usage:
   .venv/bin/python bench/nonrigid.py accuracy [--seeds 50]
   .venv/bin/python bench/nonrigid.py speed
   .venv/bin/python bench/nonrigid.py holes [--seeds 10]
-  .venv/bin/python bench/nonrigid.py amberg [--seeds 2]
 """
 
 import argparse
@@ -17,7 +16,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
 from cpapfit.align.correspondences import nearest_on_grid
 from cpapfit.align.nonrigid import NonrigidParams, register
@@ -128,27 +126,6 @@ def speed() -> None:
         print(f"peak resident memory of the whole process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
 
 
-def amberg(seeds: int) -> None:
-    """trimesh.registration.nricp_amberg on the same pairs, parameters scaled to mm."""
-    steps = [[0.02, 10, 0.5, 10], [0.007, 5, 0.5, 10], [0.002, 2.5, 0.5, 10], [0.0005, 0, 0.0, 10]]
-    print(f"machine: {platform.machine()}, Python {platform.python_version()}; nricp_amberg steps {steps}, distance_threshold 5 mm")
-    for seed, ph, scan, al, aligned in subjects(seeds):
-        ours, t_ours = timed_register(aligned, scan, al, "grid")
-        keep = al.landmarks.confidence >= 0.5
-        t0 = time.perf_counter()
-        theirs = trimesh.registration.nricp_amberg(
-            trimesh.Trimesh(aligned, TEMPLATE.faces, process=False), trimesh.Trimesh(scan.vertices, scan.faces, process=False),
-            source_landmarks=al.landmarks.template_index[keep], target_positions=al.landmarks.points[keep],
-            steps=steps, distance_threshold=5.0,
-        )
-        t_theirs = time.perf_counter() - t0
-        for name, v, t in (("cpapfit", ours.vertices, t_ours), ("nricp_amberg", theirs, t_theirs)):
-            d = scan_to_template(scan, v)
-            corr = correspondence(v, ph.surface)
-            print(f"seed {seed} {name:>12}: {t:7.2f} s, correspondence {corr:.3f} mm, scan-to-template median {np.median(d):.3f} p95 {np.percentile(d, 95):.3f} mm")
-        print(f"seed {seed} time ratio nricp_amberg / cpapfit: {t_theirs / t_ours:.1f}x")
-
-
 def holes(seeds: int) -> None:
     """30 % of the mask region's depth removed in blobs: error of the vertices over the holes."""
     print(f"machine: {platform.machine()}, Python {platform.python_version()}, seeds 0-{seeds - 1}, 30 % of the mask region's depth removed")
@@ -163,17 +140,15 @@ def holes(seeds: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("what", choices=["accuracy", "speed", "holes", "amberg"])
+    ap.add_argument("what", choices=["accuracy", "speed", "holes"])
     ap.add_argument("--seeds", type=int, default=None)
     args = ap.parse_args()
     if args.what == "accuracy":
         accuracy(args.seeds or 50)
     elif args.what == "speed":
         speed()
-    elif args.what == "holes":
-        holes(args.seeds or 10)
     else:
-        amberg(args.seeds or 2)
+        holes(args.seeds or 10)
 
 
 if __name__ == "__main__":

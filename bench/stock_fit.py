@@ -24,7 +24,8 @@ from cpapfit.ict import load_ict
 from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.pipeline import face_for, place_template
-from cpapfit.cushion.stock import SIZE_PERCENTILES, gauge_mm, population_gauge
+from cpapfit.cushion.population import gauge_mm, population_gauge
+from cpapfit.cushion.stock import SIZE_PERCENTILES
 from cpapfit.stock_fit import COMFORT_N, compared_stock
 from cpapfit.template import MASKS
 from ict_bench import ict_arguments, model_source, scan_of

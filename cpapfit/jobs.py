@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import __version__
-from .cushion.stock import population
+from .cushion.population import population
 from .errors import CpapfitError, InputError
 from .io import is_fused, load_scan
 from .outputs import design_files, report_files

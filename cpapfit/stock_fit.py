@@ -20,7 +20,8 @@ import numpy as np
 import trimesh
 
 from .cushion.nurbs import CushionParams
-from .cushion.stock import BRIDGE, SIZES, gauge_mm, mean_face, size_scale, stock_cushion
+from .cushion.population import gauge_mm
+from .cushion.stock import BRIDGE, SIZES, mean_face, size_scale, stock_cushion
 from .errors import InputError, NoStockSeat
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone

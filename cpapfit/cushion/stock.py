@@ -3,7 +3,7 @@
 Each mask's cushion is the design on the ICT Face Model's mean face (its neutral, carried onto the
 template), compensated for no one face but set back for the population: at each of the K seal-curve
 points (`contact.SAMPLES`) its rim stands back along the mask axis by how far the
-SET_BACK_PERCENTILE-th of POPULATION faces stands out there against the mean face (each face's
+SET_BACK_PERCENTILE-th of the population's faces (`cushion.population`) stands out there against the mean face (each face's
 depth taken from its own mean depth round the seal, where a mask settles; less the least set back
 round the rim), so that the wall clears most faces' high points (the nasal bridge most) and the
 membrane closes the rest; and a self-sealing membrane,
@@ -13,9 +13,8 @@ sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The
 not measured from a real stock cushion. Sizes scale it about the nasal bridge
 (template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
-one the nasal bridge to just below the lower lip (168-18). Over POPULATION faces drawn from the
-shipped ICT model, S, M and L are the SIZE_PERCENTILES of that measure over its median; a nasal
-"W" (wide) is M made as wide as L. Template frame (mm): x to the face's left, y up, z out of it.
+one the nasal bridge to just below the lower lip (168-18). Over the population, S, M and L are
+the SIZE_PERCENTILES of that measure over its median; a nasal "W" (wide) is M made as wide as L. Template frame (mm): x to the face's left, y up, z out of it.
 """
 
 from functools import lru_cache
@@ -24,18 +23,16 @@ import numpy as np
 import trimesh
 
 from ..frozen import read_only
-from ..ict import ict_face, load_ict, random_subject, template_truth
+from ..ict import ict_face, load_ict, template_truth
 from ..template import load_template
-from .contact import template_curve
 from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
+from .population import population, population_gauge, seal_depth
 from .solid import cushion_solid
 
-POPULATION = 200
 SIZE_PERCENTILES = {"S": 15.0, "M": 50.0, "L": 85.0}
 SET_BACK_PERCENTILE = 85.0
-GAUGE = {"nasal": (129, 358), "oronasal": (168, 18)}  # template landmarks the gauge measures between
 BRIDGE = 168
 SIZES = {"nasal": ("S", "M", "L", "W"), "oronasal": ("S", "M", "L")}
 
@@ -47,42 +44,13 @@ def mean_face() -> np.ndarray:
     return template_truth(ict_face(model, np.zeros(0), {}))
 
 
-def gauge_mm(mask: str, vertices: np.ndarray) -> float:
-    """The sizing gauge's measure (mm) of a `mask` on a face's template vertices (N, 3) mm."""
-    a, b = GAUGE[mask]
-    return float(np.linalg.norm(vertices[a] - vertices[b]))
-
-
-@lru_cache(maxsize=1)
-def population() -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{mask: ((POPULATION,) mm the gauge's measure, (POPULATION, K) mm each seal-curve point's
-    depth along the mask axis, `_seal_depth`)} over faces drawn from the shipped ICT model (seed 0),
-    each face made once for both masks; read-only."""
-    rng = np.random.default_rng(0)
-    faces = [template_truth(random_subject(rng, 0.0)[0]) for _ in range(POPULATION)]
-    return {mask: (read_only(np.array([gauge_mm(mask, v) for v in faces])), read_only(np.array([_seal_depth(mask, v) for v in faces])))
-            for mask in SIZES}
-
-
-def population_gauge(mask: str) -> np.ndarray:
-    """(POPULATION,) mm: the gauge's measure over the population's faces (`population`)."""
-    return population()[mask][0]
-
-
 @lru_cache(maxsize=2)
 def set_back(mask: str) -> np.ndarray:
     """(K,) mm per seal-curve point: how far a stock rim stands back along the mask axis from the
     mean face (module docstring); read-only."""
-    depth = population()[mask][1] - _seal_depth(mask, mean_face())
+    depth = population()[mask][1] - seal_depth(mask, mean_face())
     standing_out = np.percentile(depth - depth.mean(axis=1, keepdims=True), SET_BACK_PERCENTILE, axis=0)
     return read_only(standing_out - standing_out.min())
-
-
-def _seal_depth(mask: str, vertices: np.ndarray) -> np.ndarray:
-    """(K,) mm: the template seal curve's points on a face of template vertices (N, 3) mm, along
-    the mask axis."""
-    tri, bary = template_curve(mask)
-    return np.einsum("kj,kjc->kc", bary, vertices[load_template().faces[tri]]) @ AXIS
 
 
 def size_scale(mask: str, size: str) -> np.ndarray:

@@ -151,7 +151,7 @@ def rim_membrane(vertices: np.ndarray, thickness: np.ndarray, rim: np.ndarray, s
     tangent = np.roll(rim, -TANGENT_STEP, axis=0) - np.roll(rim, TANGENT_STEP, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     k = (owner[:, None] + np.arange(-spread, spread + 1)) % len(rim)  # (M, 2 spread + 1) the sections each may lie in
-    along = np.take_along_axis(vertices[thin] @ tangent.T, k, axis=1) - np.einsum("ij,ij->i", rim, tangent)[k]
+    along = np.einsum("mc,mjc->mj", vertices[thin], tangent[k]) - np.einsum("ij,ij->i", rim, tangent)[k]
     pair, step = np.nonzero(np.abs(along) <= SLAB_MM)
     near, k = thin[pair], k[pair, step]
     offset = vertices[near] - rim[k]
