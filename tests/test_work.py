@@ -2,10 +2,15 @@
 
 import multiprocessing
 import os
+import pickle
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
+import trimesh
+
+from cpapfit.evaluation.fit import Face
 from cpapfit.work import Shared, at_once
 
 
@@ -50,3 +55,17 @@ def test_shared_work_at_once_is_done_in_order_as_it_is_made():
     shared = Shared(at_once, lambda v: done.append(v) or -v, [(v,) for v in range(3)])
     assert done == [0, 1, 2]
     assert shared.results() == shared.results() == [0, -1, -2]
+
+
+def test_a_face_goes_to_a_worker_as_its_arrays_not_its_meshes_caches():
+    """A process pool pickles what it is handed in a thread of its own while this process goes on
+    filling the face's meshes' caches: the face must pickle as its meshes' arrays alone (a cache
+    growing while pickled stopped a design with "dictionary changed size during iteration")."""
+    mesh = trimesh.creation.icosphere(2)
+    face = Face(mesh, mesh.copy(), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    face.registered.kdtree, face.scan.triangles_tree  # caches filled, as a design's first queries fill them
+    for sent in (face, Face(trimesh.PointCloud(mesh.vertices), mesh, face.axis, face.up)):
+        back = pickle.loads(pickle.dumps(sent))
+        assert not back.scan._cache.cache and not back.registered._cache.cache
+        assert type(back.scan) is type(sent.scan) and np.array_equal(back.scan.vertices, sent.scan.vertices)
+        assert np.array_equal(back.registered.faces, sent.registered.faces) and np.array_equal(back.axis, sent.axis)

@@ -200,6 +200,26 @@ class Face:
     def __post_init__(self):
         freeze_arrays(self)
 
+    def __reduce__(self):
+        """Pickled (for a worker process) as its meshes' arrays, never their caches: a process pool
+        pickles in a thread of its own, while this process may be adding to those caches (a first
+        query builds an index), and a dict that grows while it is pickled stops the run."""
+        return _face, (*_arrays(self.scan), *_arrays(self.registered), self.axis, self.up)
+
+
+def _arrays(mesh: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray | None]:
+    """(vertices, triangles or None for a point cloud) of a mesh, as plain arrays."""
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces) if isinstance(mesh, trimesh.Trimesh) else None
+
+
+def _mesh(vertices: np.ndarray, faces: np.ndarray | None) -> trimesh.Trimesh | trimesh.PointCloud:
+    return trimesh.PointCloud(vertices) if faces is None else trimesh.Trimesh(vertices, faces, process=False)
+
+
+def _face(scan_vertices, scan_faces, vertices, faces, axis, up) -> Face:
+    """The `Face` of `Face.__reduce__`'s arrays."""
+    return Face(_mesh(scan_vertices, scan_faces), _mesh(vertices, faces), axis, up)
+
 
 def face_of(surface: trimesh.Trimesh | trimesh.PointCloud, warped: np.ndarray, axis: np.ndarray, up: np.ndarray) -> Face:
     """The `Face` of a scan's surface (`scan_surface`) and its registered template vertices `warped` (N, 3) mm."""
