@@ -34,11 +34,12 @@ import subprocess
 import time
 from pathlib import Path
 
+from cpapfit import __version__  # first: it sets OpenBLAS to one thread, as `cpapfit register` runs, before numpy loads it
+
 import numpy as np
 import trimesh
 
 import cpapfit.pipeline as pipeline
-from cpapfit import __version__
 from cpapfit.align.nonrigid import NonrigidParams, _landmark_targets
 from cpapfit.ict import load_ict
 from cpapfit.io import load_scan
