@@ -16,7 +16,7 @@ With --stages, each case is designed once more with `--verbose` and the wall tim
 the command reports is printed beside the whole (the stages run while a worker process seats the
 stock sizes, so a stage's time is its wall time on a shared machine, not its own cost).
 
-Usage: .venv/bin/python bench/design_time.py [--repeat N] [--against DIR] [--stages]
+Usage: .venv/bin/python bench/design_time.py [--repeat N] [--against DIR | --stages]
 """
 
 import argparse
@@ -106,6 +106,8 @@ def main() -> None:
     parser.add_argument("--against", type=Path, default=None, help="another source tree to time the same cases with")
     parser.add_argument("--stages", action="store_true", help="also each stage's wall time, from one --verbose run per case")
     args = parser.parse_args()
+    if args.against and args.stages:
+        parser.error("--stages times this tree's default cases: not with --against")
     repeat = args.repeat
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     with tempfile.TemporaryDirectory() as tmp:

@@ -7,7 +7,8 @@ from scipy.spatial import cKDTree
 
 from cpapfit.cushion.generic import AXIS, NOSE_TIP, UP, contact_on
 from cpapfit.cushion.nurbs import design_cushion
-from cpapfit.cushion.population import drawn, population, population_gauge
+from cpapfit.cushion.contact import SAMPLES
+from cpapfit.cushion.population import POPULATION, drawn, population, population_gauge
 from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, set_back, size_scale, stock_cushion
 from cpapfit.cushion.envelope import REACH_MM
 from cpapfit.evaluation.fit import KPA_PER_CMH2O, Face
@@ -27,11 +28,11 @@ def face_scaled(scale: np.ndarray) -> Face:
 
 
 def test_the_shipped_population_is_a_fresh_draw():
-    """The shipped figures (`python -m cpapfit.cushion.population`) are those the ICT model and the
+    """The shipped figures (`tools/build_stock_population.py`) are those the ICT model and the
     template give now: every gauge measure and seal depth within 1e-9 mm."""
     fresh = drawn()
     for mask, (gauge, depth) in population().items():
-        assert gauge.shape == (200,) and depth.shape == (200, 128)
+        assert gauge.shape == (POPULATION,) and depth.shape == (POPULATION, SAMPLES)
         np.testing.assert_allclose(gauge, fresh[mask][0], rtol=0, atol=1e-9)
         np.testing.assert_allclose(depth, fresh[mask][1], rtol=0, atol=1e-9)
 

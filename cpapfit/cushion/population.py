@@ -9,12 +9,12 @@ figures against a fresh draw.
 
 import io
 from functools import lru_cache
-from importlib import resources
 
 import numpy as np
 
 from ..frozen import read_only
 from ..ict import random_subject, template_truth
+from ..shipped import npz
 from ..template import MASKS, load_template
 from .contact import template_curve
 from .generic import AXIS
@@ -48,7 +48,7 @@ def drawn() -> dict[str, tuple[np.ndarray, np.ndarray]]:
 @lru_cache(maxsize=1)
 def population() -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """`drawn`'s figures as shipped, read-only."""
-    data = np.load(io.BytesIO(resources.files(__package__).joinpath("data", FILE).read_bytes()))
+    data = npz(__package__, FILE)
     return {mask: (read_only(data[f"{mask}_gauge"]), read_only(data[f"{mask}_depth"])) for mask in MASKS}
 
 

@@ -213,6 +213,7 @@ def _arrays(mesh: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.
 
 
 def _mesh(vertices: np.ndarray, faces: np.ndarray | None) -> trimesh.Trimesh | trimesh.PointCloud:
+    """The mesh of `_arrays`' (vertices, triangles or None)."""
     return trimesh.PointCloud(vertices) if faces is None else trimesh.Trimesh(vertices, faces, process=False)
 
 

@@ -18,17 +18,16 @@ translation. Subjects drawn from it lie outside the span of the shipped 40 modes
 anything that uses those modes as a shape prior.
 """
 
-import io
 import zipfile
 from dataclasses import dataclass
 from functools import lru_cache
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 from ..frozen import freeze_arrays
+from ..shipped import npz
 
 LOWER_INNER_LIP = 14  # the template landmark whose drop is a mouth's opening (`jaw_open_weight`, face states)
 EXPRESSIONS = (
@@ -84,7 +83,7 @@ class IctModel:
 
 def _data(name: str):
     """A shipped npz file (`data/name`), read."""
-    return np.load(io.BytesIO(resources.files(__package__).joinpath("data", name).read_bytes()))
+    return npz(__package__, name)
 
 
 FULL_MODEL_KEYS = (

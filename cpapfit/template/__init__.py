@@ -4,16 +4,15 @@ Frame: x to the subject's left (image right), y up, z out of the face; millimetr
 i < 468 of the refined template is MediaPipe Face Mesh landmark i.
 """
 
-import json
 from dataclasses import dataclass
 from functools import lru_cache
-from importlib import resources
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
+from ..shipped import json_data
 from .regions import contact_region
 
 N_LANDMARKS = 468
@@ -52,7 +51,7 @@ class Template:
 
 
 def _data(name: str) -> dict:
-    return json.loads(resources.files(__package__).joinpath("data", name).read_text())
+    return json_data(__package__, name)
 
 
 def canonical_face() -> tuple[np.ndarray, np.ndarray]:
