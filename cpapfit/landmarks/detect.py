@@ -17,7 +17,7 @@ import numpy as np
 
 from ..similarity import Similarity, fit_similarity
 from ..errors import InputError
-from ..render import scene_of
+from ..render import Scene, scene_of
 from ..scan import Intrinsics, Scan
 from ..template import N_LANDMARKS, Template
 from .facemesh import detect_rotations
@@ -54,13 +54,14 @@ class Detection:
     inliers: int
 
 
-def sights(scan: Scan) -> list[Sight]:
-    """The capture's own image, or offscreen views of a mesh (none for a point cloud)."""
+def sights(scan: Scan, scene: Scene | None = None) -> list[Sight]:
+    """The capture's own image, or offscreen views of a mesh (none for a point cloud); `scene`: the
+    mesh's (`render.scene_of`) where already built."""
     if scan.is_capture:
         return [] if scan.image is None else [Sight(scan.image, scan.depth, scan.intrinsics, lambda p: p, "colour image")]
     if scan.is_point_cloud:
         return []
-    scene, views = scene_of(scan.vertices, scan.faces), axis_views(scan)
+    scene, views = scene_of(scan.vertices, scan.faces) if scene is None else scene, axis_views(scan)
     with ThreadPoolExecutor(RENDER_THREADS) as pool:
         renders = pool.map(lambda view: render_view(scan, view, scene), views)
         return [Sight(image, depth, view.intrinsics, view.to_scan, f"render view {i}")
@@ -71,16 +72,18 @@ def detect_landmarks(scan: Scan, template: Template) -> Detection | None:
     """The best detection over every sight and rotation (for a mesh, refined from in front of the
     face), or None when no face is found."""
     path = "image" if scan.is_capture else "render"
-    best = _best(sights(scan), template, path)
+    scene = None if scan.is_capture or scan.is_point_cloud else scene_of(scan.vertices, scan.faces)  # every view's
+    best = _best(sights(scan, scene), template, path)
     if best is not None and path == "render":
-        best = detect_from_front(scan, template, best.similarity) or best
+        best = detect_from_front(scan, template, best.similarity, scene) or best
     return None if best is None else _as_found_by(best, path)
 
 
-def detect_from_front(scan: Scan, template: Template, pose: Similarity) -> Detection | None:
+def detect_from_front(scan: Scan, template: Template, pose: Similarity, scene: Scene | None = None) -> Detection | None:
     """Detection on renders of a mesh scan from straight in front of the template placed by `pose`
-    (FRONTAL_PASSES times, each from the last detection's pose), or None if none is found."""
-    best, scene = None, scene_of(scan.vertices, scan.faces)
+    (FRONTAL_PASSES times, each from the last detection's pose), or None if none is found; `scene`:
+    the mesh's (`render.scene_of`) where already built."""
+    best, scene = None, scene_of(scan.vertices, scan.faces) if scene is None else scene
     for _ in range(FRONTAL_PASSES):
         view = face_view(pose.apply(template.landmarks), pose.rotation[:, 2], pose.rotation[:, 1])
         image, depth = render_view(scan, view, scene)
