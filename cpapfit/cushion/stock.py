@@ -3,9 +3,9 @@
 Each mask's cushion is the design on the ICT Face Model's mean face (its neutral, carried onto the
 template), compensated for no one face but set back for the population: at each of the K seal-curve
 points (`contact.SAMPLES`) its rim stands back along the mask axis by how far the
-SET_BACK_PERCENTILE-th of the population's faces (`cushion.population`) stands out there against the mean face (each face's
-depth taken from its own mean depth round the seal, where a mask settles; less the least set back
-round the rim), so that the wall clears most faces' high points (the nasal bridge most) and the
+SET_BACK_PERCENTILE-th of the population's faces (`cushion.population`) stands out there against
+the mean face (each face's depth taken from its own mean depth round the seal, where a mask
+settles; less the least set back round the rim), so that the wall clears most faces' high points (the nasal bridge most) and the
 membrane closes the rest; and a self-sealing membrane,
 as stock silicone cushions have, sized by the custom cushion's rule for its awake slack: every
 flap reaches REACH_MM[0] at the lowest CPAP pressure (`envelope.flap_widths`, narrowed where its
@@ -14,7 +14,8 @@ not measured from a real stock cushion. Sizes scale it about the nasal bridge
 (template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
 one the nasal bridge to just below the lower lip (168-18). Over the population, S, M and L are
-the SIZE_PERCENTILES of that measure over its median; a nasal "W" (wide) is M made as wide as L. Template frame (mm): x to the face's left, y up, z out of it.
+the SIZE_PERCENTILES of that measure over its median; a nasal "W" (wide) is M made as wide as L.
+Template frame (mm): x to the face's left, y up, z out of it.
 """
 
 from functools import lru_cache

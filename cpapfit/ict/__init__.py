@@ -81,11 +81,6 @@ class IctModel:
         return np.flatnonzero((t < self.face_vertices).all(axis=1) | (t >= self.head_vertices).all(axis=1))
 
 
-def _data(name: str):
-    """A shipped npz file (`data/name`), read."""
-    return npz(__package__, name)
-
-
 FULL_MODEL_KEYS = (
     "neutral_mm", "identity_mm", "expression_mm", "expression_names", "triangles", "landmarks_multipie68",
     "face_area_vertices", "head_vertices",
@@ -103,7 +98,7 @@ def load_ict(source: Path | None = None) -> IctModel:
 
 @lru_cache(maxsize=1)
 def _shipped() -> IctModel:
-    with _data("ict_face.npz") as data:
+    with npz(__package__, "ict_face.npz") as data:
         return IctModel(
             neutral=data["neutral_mm"].astype(np.float64), identity=data["identity_mm"].astype(np.float64),
             expressions=data["expression_mm"].astype(np.float64), expression_names=tuple(str(n) for n in data["expression_names"]),
@@ -130,7 +125,7 @@ def _full(source: Path) -> IctModel:
     shipped = _shipped()
     if absent or src["neutral_mm"].shape != shipped.neutral.shape or src["identity_mm"].shape[1:] != shipped.neutral.shape:
         raise InputError(f"{source}: not the ICT face model file ({', '.join(absent) or 'its vertex count'} differs from the shipped model's)")
-    with _data("ict_face.npz") as data:
+    with npz(__package__, "ict_face.npz") as data:
         rotation, translation = data["rotation"], data["translation_mm"]
     return IctModel(
         neutral=src["neutral_mm"].astype(np.float64) @ rotation.T + translation,
@@ -178,7 +173,7 @@ def template_on_ict() -> tuple[np.ndarray, np.ndarray]:
     int64 ICT triangle and (N, 3) float64 barycentric coordinates there (N = 28 881, the template's
     vertex order): the closest point of the ICT neutral's skin (the eyeball in the eye openings) to
     the template registered onto it (`tools/build_template_on_ict.py`)."""
-    with _data("template_on_ict.npz") as data:
+    with npz(__package__, "template_on_ict.npz") as data:
         triangle, bary = data["triangle"].astype(np.int64), data["bary"].astype(np.float64)
     triangle.flags.writeable = bary.flags.writeable = False
     return triangle, bary

@@ -54,14 +54,14 @@ class Detection:
     inliers: int
 
 
-def sights(scan: Scan, scene: Scene | None = None) -> list[Sight]:
-    """The capture's own image, or offscreen views of a mesh (none for a point cloud); `scene`: the
-    mesh's (`render.scene_of`) where already built."""
+def sights(scan: Scan, scene: Scene | None) -> list[Sight]:
+    """The capture's own image, or offscreen views of a mesh (none for a point cloud); `scene`: a
+    mesh's (`render.scene_of`, None for a capture or a point cloud)."""
     if scan.is_capture:
         return [] if scan.image is None else [Sight(scan.image, scan.depth, scan.intrinsics, lambda p: p, "colour image")]
     if scan.is_point_cloud:
         return []
-    scene, views = scene_of(scan.vertices, scan.faces) if scene is None else scene, axis_views(scan)
+    views = axis_views(scan)
     with ThreadPoolExecutor(RENDER_THREADS) as pool:
         renders = pool.map(lambda view: render_view(scan, view, scene), views)
         return [Sight(image, depth, view.intrinsics, view.to_scan, f"render view {i}")
