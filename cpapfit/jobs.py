@@ -19,6 +19,7 @@ import time
 import uuid
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -31,9 +32,10 @@ from .io.landmarks import user_landmarks
 from .io.mesh import companion_files
 from .io.sweep import fused_ply
 from .io.write import json_bytes, write_bytes, write_files
+from .memory import release
 from .pipeline import Design, design
 from .records import manifest_record
-from .work import at_once
+from .work import at_once, released
 
 MANIFEST = "manifest.json"
 LEFTOVER = re.compile(r"^\..+\.(tmp|old)-\w+$")  # hidden staging names in OUT_DIR
@@ -60,16 +62,20 @@ def worker(parallel: bool, shared: Callable[[], object] | None = None):
     runs a single thread (a fork copies only the calling thread: one taken after MediaPipe and
     Embree have started theirs could hang in the child), or `at_once` when not parallel, not
     single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU).
-    `shared`: called first, here, for what it caches, which both processes need (else each makes it)."""
-    if parallel and shared is not None:
-        shared()  # before the checks: what it does must leave this process single-threaded to be forked
+    `shared`: called first, here, for what it caches, which both processes need (else each makes it).
+    What lives by then (the modules loaded, `shared`'s) is set aside from the collector's passes
+    (`gc.freeze`): a fork shares that memory, which the passes would copy page by page, and the
+    passes between stages (`memory.release`) walk only what the design made."""
+    if parallel:
+        if shared is not None:
+            shared()  # before the checks: what it does must leave this process single-threaded to be forked
+        gc.freeze()
     if not (parallel and _single_threaded() and _idle_core()):
         yield at_once
         return
-    gc.freeze()  # the fork shares this memory: the collector's passes would otherwise copy every page of it
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         pool.submit(int).result()  # the fork, now
-        yield pool.submit
+        yield partial(pool.submit, released)
 
 
 def _idle_core() -> bool:
@@ -96,7 +102,9 @@ def design_job(
 ) -> tuple[DesignRun, dict[str, bytes]]:
     """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
     files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes and some report pictures made in a second
-    process (`worker`; the stock family's population, which both processes need, made first)."""
+    process (`worker`; the stock family's population, which both processes need, made first). What a
+    stage leaves is released as the next starts (`memory.release`)."""
+    on_stage = _releasing(on_stage)
     with worker(parallel, population if stock else None) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
@@ -107,6 +115,14 @@ def design_job(
         on_stage("report")
         files |= report_files(d, scan, files, submit)
     return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files), d), files
+
+
+def _releasing(on_stage: Callable[[str], None]) -> Callable[[str], None]:
+    """`on_stage` with the memory the last stage left released first."""
+    def announce(stage: str) -> None:
+        release()
+        on_stage(stage)
+    return announce
 
 
 @dataclass(frozen=True)

@@ -221,7 +221,7 @@ def design(
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
         try:
-            compared = fitting.comparison()
+            compared = fitting.comparison(faces=asleep)
         except NoStockSeat as exc:  # the custom design stands, compared with none
             unfitted = str(exc)
         else:

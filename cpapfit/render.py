@@ -59,6 +59,10 @@ class Scene:
     def __post_init__(self):
         freeze_arrays(self)
 
+    def __reduce__(self):
+        """Pickled (for a worker process) as its mesh, its Embree scene built again there."""
+        return scene_of, (self.vertices, self.faces)
+
 
 def scene_of(vertices: np.ndarray, faces: np.ndarray) -> Scene:
     """The `Scene` of an (N, 3) mm mesh: its Embree scene and area-weighted vertex normals."""

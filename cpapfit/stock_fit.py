@@ -25,7 +25,7 @@ from .cushion.stock import BRIDGE, SIZES, mean_face, size_scale, stock_cushion
 from .errors import InputError, NoStockSeat
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
-from .evaluation.states import StateFit, fit_states, merged, sleep_states
+from .evaluation.states import FaceState, StateFit, fit_states, merged, sleep_states
 from .work import Shared, at_once
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
@@ -117,8 +117,10 @@ class StockFitting:
     fit_params: FitParams
     submit: Callable
 
-    def comparison(self, asleep: bool = True) -> StockComparison:
-        """The `StockComparison`; `asleep`: the best size (and the gauge's) pressed in each sleep state too."""
+    def comparison(self, asleep: bool = True, faces: dict[FaceState, Face] | None = None) -> StockComparison:
+        """The `StockComparison`; `asleep`: the best size (and the gauge's) pressed in each sleep state
+        too, on `faces` where already made (`state_faces`: the custom cushion's, on a mesh scan
+        hundreds of MB each)."""
         mask, face, params, fit_params = self.mask, self.face, self.params, self.fit_params
         done = dict(zip(self.sizes, self.seats.results()))
         sizes = tuple(sorted((fit for fit in done.values() if fit is not None), key=StockFit.rank))
@@ -130,8 +132,8 @@ class StockFitting:
         gauge_fit = compared.gauge_fit
         if not asleep:
             return compared
-        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge") if gauge_fit else None
-        return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params),
+        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge", faces) if gauge_fit else None
+        return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params, faces=faces),
                        gauge_states=gauge_states.result() if gauge_states else ())
 
 
@@ -153,11 +155,13 @@ def compared_stock(mask: str, face: Face, choice: str = "best", params: CushionP
 
 
 def stock_states(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams(),
-                 fit_params: FitParams = FitParams(), name: str = "stock") -> tuple[StateFit, ...]:
-    """The stock cushion of `fit` in each sleep state of `mask` on `face`, at the force set for it, as `name`."""
+                 fit_params: FitParams = FitParams(), name: str = "stock",
+                 faces: dict[FaceState, Face] | None = None) -> tuple[StateFit, ...]:
+    """The stock cushion of `fit` in each sleep state of `mask` on `face`, at the force set for it,
+    as `name`; `faces`: the face in each state where already made (`state_faces`)."""
     mesh, thickness = placed_stock(mask, fit, face, params)
     return fit_states({name: mesh}, face, sleep_states(mask), params.flange_mm, fit.fit.force_n, fit_params,
-                      {name: fit.fit}, {name: thickness})
+                      {name: fit.fit}, {name: thickness}, faces)
 
 
 def gauge_size(mask: str, registered: np.ndarray) -> str:

@@ -4,6 +4,8 @@ Either way a future whose result() is fn(*args), so stages run the same with and
 import threading
 from concurrent.futures import Future
 
+from .memory import release
+
 
 def at_once(fn, *args) -> Future:
     """fn(*args) run here and now, as a finished future (an exception is raised by result())."""
@@ -13,6 +15,15 @@ def at_once(fn, *args) -> Future:
     except Exception as exc:
         done.set_exception(exc)
     return done
+
+
+def released(fn, *args):
+    """fn(*args), then the memory it left released (`memory.release`): a worker's tasks each take
+    their own copy of what they are handed (a face, its indexes built again), which would pile up."""
+    try:
+        return fn(*args)
+    finally:
+        release()
 
 
 def ahead(submit, fn, *args) -> None:

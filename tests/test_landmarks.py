@@ -1,7 +1,9 @@
 """Landmarks and the initial alignment on synthetic subjects, rotated phone frames, bare meshes,
 user landmark files, scans that are not faces, and the shared real scans."""
 
+import gc
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from cpapfit.errors import InputError
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
+from cpapfit.render import Scene
 from cpapfit.landmarks.cloud import facing_surface
 from cpapfit.align.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
@@ -116,6 +119,17 @@ def test_untextured_mesh_is_found_by_rendering(rotated_stl):
     lm, fit, _ = initial_alignment(load_scan(path), TEMPLATE)
     assert lm.path == "render"
     assert region_error(fit, surface, faces) <= 3.0
+
+
+def test_a_meshs_renders_do_not_outlive_its_landmarks(rotated_stl):
+    """The Embree scene of a mesh's renders is freed with its landmarks: MediaPipe keeps an import
+    error in a global, and its traceback's frames held the locals of whoever first imported it."""
+    initial_alignment(load_scan(rotated_stl[0]), TEMPLATE)
+    gc.collect()
+    assert not [o for o in gc.get_objects() if isinstance(o, Scene)]
+    kept = [value for name, module in list(sys.modules.items()) if name.split(".")[0] == "mediapipe"
+            for value in vars(module).values() if isinstance(value, BaseException) and value.__traceback__ is not None]
+    assert not kept
 
 
 def test_colours_that_are_not_skin_are_set_aside_for_the_shaded_renders(rotated_stl, tmp_path):

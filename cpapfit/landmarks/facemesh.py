@@ -35,10 +35,23 @@ def _face_mesh():
     with quiet_stderr():
         from mediapipe.python.solutions.face_mesh import FaceMesh
 
+        _forget_import_errors("mediapipe")
         return FaceMesh(
             static_image_mode=True, refine_landmarks=True, max_num_faces=MAX_FACES,
             min_detection_confidence=MIN_DETECTION_CONFIDENCE,
         )
+
+
+def _forget_import_errors(package: str) -> None:
+    """Drop the tracebacks of the errors a `package` keeps in its modules' globals (mediapipe keeps
+    the ImportError of its optional audio package): a traceback's frames reach back through the
+    import to every caller of the time, whose locals (a scan, its Embree scene, the design) would
+    otherwise live as long as the process."""
+    for name, module in list(sys.modules.items()):
+        if name == package or name.startswith(package + "."):
+            for value in list(vars(module).values()):
+                if isinstance(value, BaseException):
+                    value.__traceback__ = None
 
 
 def detect(image: np.ndarray) -> list[np.ndarray]:

@@ -14,7 +14,7 @@ from ..align.nonrigid import Registration
 from ..cushion.contact import Contact
 from ..evaluation.fit import CushionFit
 from ..pipeline import Alignment, Design
-from ..render import scene_of
+from ..render import Scene, scene_of
 from ..scan import Scan
 from ..template import load_template
 from ..work import at_once
@@ -128,8 +128,10 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
     ]
 
 
-def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, frame: Face, face: Face, whole, close) -> list[Picture]:
-    """The scan understood: landmarks, registration residual, contact curve, cushion and assembled mask on the face."""
+def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, frame: Face, face: Face, whole, close,
+                    scene: Scene) -> list[Picture]:
+    """The scan understood: landmarks, registration residual, contact curve, cushion and assembled mask on the face
+    (`scene`: the face's, `render.scene_of`)."""
     sim = al.similarity
     res = reg.residual[reg.valid]
     return [
@@ -148,12 +150,12 @@ def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion:
                 pic.contact_picture((whole, close), contact.curve, contact.on_scan)),
         Picture("cushion_on_face.png", "The custom cushion on the face",
                 "The printable cushion (blue) as designed on the scan.",
-                pic.cushion_picture(face, cushion.vertices, cushion.faces, sim)),
+                pic.cushion_picture(face, cushion.vertices, cushion.faces, sim, scene)),
         Picture("mask_on_face.png", "The assembled mask on the face",
                 "The cushion (blue) in its frame (white): the frame carries the 22 mm connector for the hose, the exhaust vents "
                 "on its upper side, the four headgear strap slots and, on an oronasal mask, the anti-asphyxia valve's opening "
                 "below the connector. The table above gives the mask's figures.",
-                pic.mask_picture(face, cushion, frame, sim)),
+                pic.mask_picture(face, cushion, frame, sim, scene)),
     ]
 
 
@@ -169,7 +171,7 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])), scene)
     cushion = Face(d.solid.vertices, d.solid.faces)
     frame = Face(d.frame.mesh.vertices, d.frame.mesh.faces)
-    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, frame, face, whole, close)
+    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, frame, face, whole, close, scene)
     scale = pressure_scale(rims, window_kpa)
     later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     later.append(state_picture(close, d, scale))

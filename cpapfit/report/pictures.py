@@ -10,12 +10,12 @@ from matplotlib.figure import Figure
 
 from ..similarity import Similarity
 from ..landmarks.types import Landmarks
-from ..render import raycast, scene_of, shade
+from ..render import Scene, raycast, scene_of, shade
 from ..scan import Intrinsics
 from ..template import TEMPLATE_TO_CAMERA, Template
 from .draw import draw_dots, draw_loop
 from .figure import FONT, ColourScale, panels_png, png
-from .frame import GREY_SKIN, Face, Shot, around_seal, face_view, place_name, shoot, to_pixels, whole_face_view
+from .frame import Face, Shot, around_seal, face_view, place_name, shoot, to_pixels, whole_face_view
 from ..loops import loop_lengths
 from .rim import KPA_TO_MMHG
 
@@ -91,32 +91,35 @@ def contact_picture(shots: tuple[Shot, Shot], curve: np.ndarray, on_scan: np.nda
     return panels_png(images, [title, "close-up"], "Where the cushion will touch the face", legend=legend)
 
 
-def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similarity: Similarity) -> bytes:
-    """PNG: the cushion solid ((N, 3) mm, (M, 3)) on the face, from the front and turned 50 degrees."""
-    return solids_picture(face, ((vertices, faces, CUSHION_COLOUR),), similarity, "The custom cushion on the face")
+def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similarity: Similarity, scene: Scene | None = None) -> bytes:
+    """PNG: the cushion solid ((N, 3) mm, (M, 3)) on the face, from the front and turned 50 degrees
+    (`scene`: the face's, `solids_picture`)."""
+    return solids_picture(face, ((vertices, faces, CUSHION_COLOUR),), similarity, "The custom cushion on the face", scene)
 
 
-def mask_picture(face: Face, cushion: Face, frame: Face, similarity: Similarity) -> bytes:
-    """PNG: the assembled mask, the cushion and the frame (mm, scan frame), on the face, from the front and turned 50 degrees."""
+def mask_picture(face: Face, cushion: Face, frame: Face, similarity: Similarity, scene: Scene | None = None) -> bytes:
+    """PNG: the assembled mask, the cushion and the frame (mm, scan frame), on the face, from the
+    front and turned 50 degrees (`scene`: the face's, `solids_picture`)."""
     return solids_picture(face, ((cushion.vertices, cushion.faces, CUSHION_COLOUR), (frame.vertices, frame.faces, FRAME_COLOUR)),
-                          similarity, "The assembled mask on the face")
+                          similarity, "The assembled mask on the face", scene)
 
 
-def solids_picture(face: Face, solids: tuple, similarity: Similarity, heading: str) -> bytes:
+def solids_picture(face: Face, solids: tuple, similarity: Similarity, heading: str, scene: Scene | None = None) -> bytes:
     """PNG: solids ((vertices (N, 3) mm, faces (M, 3), colour (3,) in [0, 1]), ...) on the face, from
-    the front and turned 50 degrees, framed on them."""
-    skin = np.tile(GREY_SKIN, (len(face.vertices), 1)) if face.albedo is None else face.albedo
-    vertices, faces, colours, count = [face.vertices], [face.faces], [skin], len(face.vertices)
-    for v, f, colour in solids:
-        vertices.append(v)
-        faces.append(f + count)
-        colours.append(np.tile(colour, (len(v), 1)))
-        count += len(v)
-    both = Face(np.vstack(vertices), np.vstack(faces), np.vstack(colours))
-    parts = np.vstack(vertices[1:])
-    extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(parts, axis=0).max()))
-    scene = scene_of(both.vertices, both.faces)
-    images = [shoot(both, face_view(similarity, parts.mean(axis=0), extent, yaw), scene).image for yaw in (0.0, 50.0)]
+    the front and turned 50 degrees, framed on them. The face and the solids are ray-cast apart and
+    each pixel shows the nearer (`scene`: the face's, where already built: a dense scan's is
+    hundreds of MB)."""
+    count = np.cumsum([0] + [len(v) for v, _, _ in solids])
+    parts = Face(np.vstack([v for v, _, _ in solids]), np.vstack([f + n for (_, f, _), n in zip(solids, count)]),
+                 np.vstack([np.tile(colour, (len(v), 1)) for v, _, colour in solids]))
+    extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(parts.vertices, axis=0).max()))
+    scenes = (scene_of(face.vertices, face.faces) if scene is None else scene, scene_of(parts.vertices, parts.faces))
+    images = []
+    for yaw in (0.0, 50.0):
+        view = face_view(similarity, parts.vertices.mean(axis=0), extent, yaw)
+        skin, solid = shoot(face, view, scenes[0]), shoot(parts, view, scenes[1])
+        nearer = np.isfinite(solid.depth) & ~(skin.depth <= solid.depth)
+        images.append(np.where(nearer[..., None], solid.image, skin.image))
     return panels_png(images, ["front", "turned 50° (patient's right side)"], heading)
 
 
