@@ -8,7 +8,6 @@ beside it and renamed into place; a run killed midway leaves only hidden folders
 """
 
 import contextlib
-import gc
 import hashlib
 import json
 import multiprocessing
@@ -32,7 +31,7 @@ from .io.landmarks import user_landmarks
 from .io.mesh import companion_files
 from .io.sweep import fused_ply
 from .io.write import json_bytes, write_bytes, write_files
-from .memory import release
+from .memory import release, settled
 from .pipeline import Design, design
 from .records import manifest_record
 from .work import at_once, released
@@ -63,19 +62,16 @@ def worker(parallel: bool, shared: Callable[[], object] | None = None):
     Embree have started theirs could hang in the child), or `at_once` when not parallel, not
     single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU).
     `shared`: called first, here, for what it caches, which both processes need (else each makes it).
-    What lives by then (the modules loaded, `shared`'s) is set aside from the collector's passes
-    (`gc.freeze`): a fork shares that memory, which the passes would copy page by page, and the
-    passes between stages (`memory.release`) walk only what the design made."""
-    if parallel:
-        if shared is not None:
-            shared()  # before the checks: what it does must leave this process single-threaded to be forked
-        gc.freeze()
-    if not (parallel and _single_threaded() and _idle_core()):
-        yield at_once
-        return
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
-        pool.submit(int).result()  # the fork, now
-        yield partial(pool.submit, released)
+    Either way within `memory.settled`; the worker releases what each task leaves (`work.released`)."""
+    if parallel and shared is not None:
+        shared()  # before the checks: what it does must leave this process single-threaded to be forked
+    with settled():
+        if not (parallel and _single_threaded() and _idle_core()):
+            yield at_once
+            return
+        with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+            pool.submit(int).result()  # the fork, now
+            yield partial(pool.submit, released)
 
 
 def _idle_core() -> bool:

@@ -132,7 +132,7 @@ class StockFitting:
         gauge_fit = compared.gauge_fit
         if not asleep:
             return compared
-        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge", faces) if gauge_fit else None
+        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge") if gauge_fit else None
         return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params, faces=faces),
                        gauge_states=gauge_states.result() if gauge_states else ())
 

@@ -123,7 +123,7 @@ def test_untextured_mesh_is_found_by_rendering(rotated_stl):
 
 def test_a_meshs_renders_do_not_outlive_its_landmarks(rotated_stl):
     """The Embree scene of a mesh's renders is freed with its landmarks: MediaPipe keeps an import
-    error in a global, and its traceback's frames held the locals of whoever first imported it."""
+    error in a global, whose traceback's frames would hold the locals of whoever first imported it."""
     initial_alignment(load_scan(rotated_stl[0]), TEMPLATE)
     gc.collect()
     assert not [o for o in gc.get_objects() if isinstance(o, Scene)]

@@ -35,11 +35,12 @@ def _face_mesh():
     with quiet_stderr():
         from mediapipe.python.solutions.face_mesh import FaceMesh
 
-        _forget_import_errors("mediapipe")
-        return FaceMesh(
+        face_mesh = FaceMesh(
             static_image_mode=True, refine_landmarks=True, max_num_faces=MAX_FACES,
             min_detection_confidence=MIN_DETECTION_CONFIDENCE,
         )
+    _forget_import_errors("mediapipe")
+    return face_mesh
 
 
 def _forget_import_errors(package: str) -> None:
@@ -49,7 +50,7 @@ def _forget_import_errors(package: str) -> None:
     otherwise live as long as the process."""
     for name, module in list(sys.modules.items()):
         if name == package or name.startswith(package + "."):
-            for value in list(vars(module).values()):
+            for value in list(getattr(module, "__dict__", {}).values()):
                 if isinstance(value, BaseException):
                     value.__traceback__ = None
 

@@ -91,29 +91,29 @@ def contact_picture(shots: tuple[Shot, Shot], curve: np.ndarray, on_scan: np.nda
     return panels_png(images, [title, "close-up"], "Where the cushion will touch the face", legend=legend)
 
 
-def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similarity: Similarity, scene: Scene | None = None) -> bytes:
+def cushion_picture(face: Face, vertices: np.ndarray, faces: np.ndarray, similarity: Similarity, scene: Scene) -> bytes:
     """PNG: the cushion solid ((N, 3) mm, (M, 3)) on the face, from the front and turned 50 degrees
     (`scene`: the face's, `solids_picture`)."""
     return solids_picture(face, ((vertices, faces, CUSHION_COLOUR),), similarity, "The custom cushion on the face", scene)
 
 
-def mask_picture(face: Face, cushion: Face, frame: Face, similarity: Similarity, scene: Scene | None = None) -> bytes:
+def mask_picture(face: Face, cushion: Face, frame: Face, similarity: Similarity, scene: Scene) -> bytes:
     """PNG: the assembled mask, the cushion and the frame (mm, scan frame), on the face, from the
     front and turned 50 degrees (`scene`: the face's, `solids_picture`)."""
     return solids_picture(face, ((cushion.vertices, cushion.faces, CUSHION_COLOUR), (frame.vertices, frame.faces, FRAME_COLOUR)),
                           similarity, "The assembled mask on the face", scene)
 
 
-def solids_picture(face: Face, solids: tuple, similarity: Similarity, heading: str, scene: Scene | None = None) -> bytes:
+def solids_picture(face: Face, solids: tuple, similarity: Similarity, heading: str, scene: Scene) -> bytes:
     """PNG: solids ((vertices (N, 3) mm, faces (M, 3), colour (3,) in [0, 1]), ...) on the face, from
     the front and turned 50 degrees, framed on them. The face and the solids are ray-cast apart and
-    each pixel shows the nearer (`scene`: the face's, where already built: a dense scan's is
-    hundreds of MB)."""
+    each pixel shows the nearer (`scene`: the face's, `render.scene_of`, shared with the report's
+    other pictures: a dense scan's is hundreds of MB)."""
     count = np.cumsum([0] + [len(v) for v, _, _ in solids])
     parts = Face(np.vstack([v for v, _, _ in solids]), np.vstack([f + n for (_, f, _), n in zip(solids, count)]),
                  np.vstack([np.tile(colour, (len(v), 1)) for v, _, colour in solids]))
     extent = max(CUSHION_FRAME_MM * similarity.scale, 1.8 * float(np.ptp(parts.vertices, axis=0).max()))
-    scenes = (scene_of(face.vertices, face.faces) if scene is None else scene, scene_of(parts.vertices, parts.faces))
+    scenes = (scene, scene_of(parts.vertices, parts.faces))
     images = []
     for yaw in (0.0, 50.0):
         view = face_view(similarity, parts.vertices.mean(axis=0), extent, yaw)
