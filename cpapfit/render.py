@@ -12,6 +12,7 @@ import trimesh
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
 from .frozen import freeze_arrays
+from .normals import mesh_normals
 from .rgbd import pixel_rays
 from .scan import Intrinsics
 
@@ -65,9 +66,8 @@ class Scene:
 
 
 def scene_of(vertices: np.ndarray, faces: np.ndarray) -> Scene:
-    """The `Scene` of an (N, 3) mm mesh: its Embree scene and area-weighted vertex normals."""
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    return Scene(vertices, faces, np.array(mesh.vertex_normals), RayMeshIntersector(mesh))
+    """The `Scene` of an (N, 3) mm mesh: its Embree scene and vertex normals (`normals.mesh_normals`)."""
+    return Scene(vertices, faces, mesh_normals(vertices, faces)[1], RayMeshIntersector(trimesh.Trimesh(vertices, faces, process=False)))
 
 
 def look(scene: Scene, view) -> tuple[Hits, np.ndarray, np.ndarray]:

@@ -164,7 +164,8 @@ def first_surface(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray)
         return np.full(len(at), np.nan)
     disc = _disc() @ plane_across(forward)
     origins = (at[:, None, :] + disc[None] + REACH_MM * forward).reshape(-1, 3)
-    hits, ray, _ = surface.ray.intersects_location(origins, np.tile(-forward, (len(origins), 1)), multiple_hits=False)
+    probed = _along(surface, at, forward, 0.5 * PROBE_MM)
+    hits, ray, _ = probed.ray.intersects_location(origins, np.tile(-forward, (len(origins), 1)), multiple_hits=False)
     height = np.full(len(origins), np.nan)
     height[ray] = hits @ forward
     height = height.reshape(len(at), -1)
@@ -172,6 +173,18 @@ def first_surface(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray)
     out = np.full(len(at), np.nan)
     out[enough] = np.nanmedian(height[enough], axis=1)
     return out
+
+
+def _along(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray, radius_mm: float) -> trimesh.Trimesh:
+    """The triangles of `surface` a ray along unit `forward` passing within `radius_mm` across of one
+    of (K, 3) `at` points can meet: those with a corner that near across, give or take their longest
+    edge (a point in a triangle lies no farther than that from each corner). A dense head's Embree
+    scene is not built for a few probes."""
+    across = plane_across(forward).T
+    corners = np.asarray(surface.vertices)[surface.faces]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    distance = cKDTree(at @ across).query((corners @ across).reshape(-1, 2))[0].reshape(-1, 3).min(axis=1)
+    return trimesh.Trimesh(surface.vertices, surface.faces[distance <= radius_mm + longest], process=False)
 
 
 def _disc() -> np.ndarray:

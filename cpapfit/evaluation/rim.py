@@ -411,7 +411,7 @@ def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointClo
         return out, tri
     around = np.asarray(scan.vertex_faces)[near].reshape(len(points), -1)
     row, column = np.nonzero(around >= 0)
-    on = trimesh.triangles.closest_point(np.asarray(scan.triangles)[around[row, column]], points[row])
+    on = trimesh.triangles.closest_point(vertices[np.asarray(scan.faces)[around[row, column]]], points[row])
     order = np.lexsort((np.linalg.norm(on - points[row], axis=1), row))
     first = order[np.unique(row[order], return_index=True)[1]]
     out[row[first]], tri[row[first]] = on[first], around[row[first], column[first]]

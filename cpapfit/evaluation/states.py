@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from ..align.morphable import smooth_fields
 from ..frozen import freeze_arrays
+from ..normals import lean_mesh
 from ..ict import LOWER_INNER_LIP, load_ict, template_truth
 from ..template import load_template
 from ..errors import InputError
@@ -128,11 +129,12 @@ def state_face(face: Face, move: np.ndarray) -> Face:
 
 
 def _moved_surface(surface: trimesh.Trimesh | trimesh.PointCloud, move: np.ndarray):
-    """A copy of a scan surface with its vertices moved by (V, 3) mm."""
+    """A copy of a scan surface with its vertices moved by (V, 3) mm (`normals.lean_mesh`: a state's
+    face lives through the design, and a dense scan's cache would be hundreds of MB)."""
     points = np.asarray(surface.vertices) + move
     if isinstance(surface, trimesh.PointCloud):
         return trimesh.PointCloud(points)
-    return trimesh.Trimesh(points, surface.faces, process=False)
+    return lean_mesh(points, np.asarray(surface.faces))
 
 
 def moved(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float) -> trimesh.Trimesh:
