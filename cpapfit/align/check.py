@@ -180,10 +180,9 @@ def _along(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray, radius
     of (K, 3) `at` points can meet: those with a corner that near across, give or take their longest
     edge (a point in a triangle lies no farther than that from each corner). A dense head's Embree
     scene is not built for a few probes."""
-    across = plane_across(forward).T
-    corners = np.asarray(surface.vertices)[surface.faces]
-    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-    distance = cKDTree(at @ across).query((corners @ across).reshape(-1, 2))[0].reshape(-1, 3).min(axis=1)
+    vertices, faces, across = np.asarray(surface.vertices), surface.faces, plane_across(forward).T
+    longest = np.max([np.linalg.norm(vertices[faces[:, k]] - vertices[faces[:, k - 1]], axis=1) for k in range(3)], axis=0)
+    distance = cKDTree(at @ across).query(vertices @ across)[0][faces].min(axis=1)
     return trimesh.Trimesh(surface.vertices, surface.faces[distance <= radius_mm + longest], process=False)
 
 

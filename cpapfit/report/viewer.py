@@ -25,7 +25,7 @@ LIGHT = {"lighting": {"ambient": 0.25, "diffuse": 0.95, "specular": 0.05, "rough
 
 def viewer_face(face: Face, centre: np.ndarray, radius_mm: float = CROP_MM, max_triangles: int = MAX_TRIANGLES) -> Face:
     """The face cropped to triangles within radius_mm of `centre` (mm) and decimated (quadric error) to at most max_triangles."""
-    keep = (np.linalg.norm(face.vertices[face.faces] - centre, axis=2) < radius_mm).all(axis=1)
+    keep = (np.linalg.norm(face.vertices - centre, axis=1) < radius_mm)[face.faces].all(axis=1)
     mesh = trimesh.Trimesh(np.array(face.vertices), face.faces[keep], process=False)  # writable: the decimator needs it
     mesh.remove_unreferenced_vertices()
     if len(mesh.faces) > max_triangles:
