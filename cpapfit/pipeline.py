@@ -204,6 +204,8 @@ def design(
     al, reg = placement.alignment, placement.registration
     judged = assessed(scan, mask, placement, params, quality, on_stage)  # or refused: rescan
     face, contact = judged.face, judged.contact
+    if stock and submit is at_once:
+        on_stage("the stock sizes, each at its best seat")  # seated here and now: no worker seats them alongside
     fitting = fitting_stock(mask, face, stock, params, fit_params, submit) if stock else None
     on_stage("solid and checks")
     params = replace(params, frame_clearance_mm=ring_clearance(judged.neutral, face.registered))  # the dead space within its limit

@@ -11,6 +11,8 @@ import numpy as np
 import trimesh
 
 from cpapfit.evaluation.fit import Face
+from cpapfit.io import load_scan
+from cpapfit.pipeline import design
 from cpapfit.work import Shared, at_once
 
 
@@ -69,3 +71,11 @@ def test_a_face_goes_to_a_worker_as_its_arrays_not_its_meshes_caches():
         assert not back.scan._cache.cache and not back.registered._cache.cache
         assert type(back.scan) is type(sent.scan) and np.array_equal(back.scan.vertices, sent.scan.vertices)
         assert np.array_equal(back.registered.faces, sent.registered.faces) and np.array_equal(back.axis, sent.axis)
+
+
+def test_the_stock_sizes_seated_here_are_a_stage_of_their_own(placed1, phantom1_dir):
+    """With no worker the stock sizes are seated as the custom cushion's contact is judged:
+    `--verbose` times them as a stage of their own, not as the cushion's."""
+    stages = []
+    design(load_scan(phantom1_dir), "nasal", on_stage=stages.append, placement=placed1, stock="M")
+    assert stages[stages.index("cushion") + 1 : stages.index("solid and checks")] == ["the stock sizes, each at its best seat"]
