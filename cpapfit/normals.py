@@ -1,7 +1,7 @@
 """Normals of a triangle mesh as trimesh gives them, without a trimesh mesh's cache.
 
 A `trimesh.Trimesh` keeps what its normals were made from (its triangles, their cross products and
-angles: ~200 bytes a triangle) for as long as the mesh lives; a mesh made to be ray-cast or pressed
+angles: ~120 bytes a triangle) for as long as the mesh lives; a mesh made to be ray-cast or pressed
 onto needs only the normals.
 """
 
@@ -11,8 +11,8 @@ import trimesh
 
 def mesh_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((M, 3) unit face normals, zero where a triangle is degenerate; (N, 3) unit vertex normals,
-    each its triangles' weighted by their angle there) of an (N, 3), (M, 3) mesh, as trimesh's
-    `Trimesh.face_normals` and `Trimesh.vertex_normals`."""
+    each its triangles' weighted by their angle there, zero at a vertex in none) of an (N, 3),
+    (M, 3) mesh, as trimesh's `Trimesh.face_normals` and `Trimesh.vertex_normals`."""
     corners = vertices[faces]
     unit, valid = trimesh.triangles.normals(corners)
     face = np.zeros((len(faces), 3))

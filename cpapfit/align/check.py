@@ -177,13 +177,13 @@ def first_surface(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray)
 
 def _along(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray, radius_mm: float) -> trimesh.Trimesh:
     """The triangles of `surface` a ray along unit `forward` passing within `radius_mm` across of one
-    of (K, 3) `at` points can meet: those with a corner that near across, give or take their longest
-    edge (a point in a triangle lies no farther than that from each corner). A dense head's Embree
-    scene is not built for a few probes."""
-    vertices, faces, across = np.asarray(surface.vertices), surface.faces, plane_across(forward).T
+    of (K, 3) `at` points can meet: those whose corners all lie that near across, give or take their
+    longest edge (a point in a triangle lies no farther than that from each corner). A dense head's
+    Embree scene is not built for a few probes."""
+    vertices, faces, across = np.asarray(surface.vertices), np.asarray(surface.faces), plane_across(forward).T
     longest = np.max([np.linalg.norm(vertices[faces[:, k]] - vertices[faces[:, k - 1]], axis=1) for k in range(3)], axis=0)
-    distance = cKDTree(at @ across).query(vertices @ across)[0][faces].min(axis=1)
-    return trimesh.Trimesh(surface.vertices, surface.faces[distance <= radius_mm + longest], process=False)
+    distance = cKDTree(at @ across).query(vertices @ across)[0][faces].max(axis=1)
+    return trimesh.Trimesh(vertices, faces[distance <= radius_mm + longest], process=False)
 
 
 def _disc() -> np.ndarray:
