@@ -130,11 +130,14 @@ def state_face(face: Face, move: np.ndarray) -> Face:
 
 def _moved_surface(surface: trimesh.Trimesh | trimesh.PointCloud, move: np.ndarray):
     """A copy of a scan surface with its vertices moved by (V, 3) mm (`normals.lean_mesh`: a state's
-    face lives through the design, and a dense scan's cache would be hundreds of MB)."""
+    face lives through the design, and a dense scan's cache would be hundreds of MB), sharing the
+    surface's table of each vertex's triangles."""
     points = np.asarray(surface.vertices) + move
     if isinstance(surface, trimesh.PointCloud):
         return trimesh.PointCloud(points)
-    return lean_mesh(points, np.asarray(surface.faces))
+    mesh = lean_mesh(points, np.asarray(surface.faces))
+    mesh._cache["vertex_faces"] = surface.vertex_faces  # the same triangles: trimesh's own way to set a cached value
+    return mesh
 
 
 def moved(cushion: trimesh.Trimesh, face: Face, shift_mm: float, roll_deg: float) -> trimesh.Trimesh:

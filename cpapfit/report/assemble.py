@@ -14,6 +14,7 @@ from ..align.nonrigid import Registration
 from ..cushion.contact import Contact
 from ..evaluation.fit import CushionFit
 from ..pipeline import Alignment, Design
+from ..memory import release
 from ..render import Scene, scene_of
 from ..scan import Scan
 from ..template import load_template
@@ -166,6 +167,8 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     sim, mask = d.alignment.similarity, d.contact.mask
     rims, window_kpa = evaluated_rims(d), d.fit_params.window_kpa
     face = scan_face(scan, d)
+    shown = viewer_face(face, np.mean(d.contact.curve, axis=0))  # decimated, and its spent memory handed back, before the scene is built
+    release()
     scene = scene_of(face.vertices, face.faces)
     whole = shoot(face, whole_face_view(sim), scene)
     close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])), scene)
@@ -176,8 +179,7 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     later.append(state_picture(close, d, scale))
     values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}
-    centre = np.mean(d.contact.curve, axis=0)
-    fig = viewer_figure(viewer_face(face, centre), cushion,
+    fig = viewer_figure(shown, cushion,
                         {n: (r.points, values[n]) for n, r in rims.items()}, scale, sim, d.cushion.axis)
     notices = (gate_notices(fit) + landmark_notices(d.alignment.landmarks)
                + scan_notices(d.contact.curve, d.contact.on_scan, sim, mask) + fit_notices(rims, window_kpa, sim, mask))

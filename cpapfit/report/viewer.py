@@ -15,6 +15,7 @@ from .figure import ColourScale
 from .frame import Face
 
 MAX_TRIANGLES = 30_000
+CLUSTERED = 4  # a crop of more triangles than this many times the most shown is first thinned (the decimator keeps its largest input's size held)
 CROP_MM = 110.0  # face shown within this distance of the seal's centre
 SKIN = "#d9c0ad"
 CUSHION_SKIN = "#8fb8e6"
@@ -24,13 +25,27 @@ LIGHT = {"lighting": {"ambient": 0.25, "diffuse": 0.95, "specular": 0.05, "rough
 
 
 def viewer_face(face: Face, centre: np.ndarray, radius_mm: float = CROP_MM, max_triangles: int = MAX_TRIANGLES) -> Face:
-    """The face cropped to triangles within radius_mm of `centre` (mm) and decimated (quadric error) to at most max_triangles."""
+    """The face cropped to triangles within radius_mm of `centre` (mm) and decimated (quadric error)
+    to at most max_triangles; a crop of more than CLUSTERED times that many is first thinned to
+    about CLUSTERED times by vertex clustering (`clustered`)."""
     keep = (np.linalg.norm(face.vertices - centre, axis=1) < radius_mm)[face.faces].all(axis=1)
     mesh = trimesh.Trimesh(np.array(face.vertices), face.faces[keep], process=False)  # writable: the decimator needs it
     mesh.remove_unreferenced_vertices()
+    if len(mesh.faces) > CLUSTERED * max_triangles:
+        cube = np.sqrt(2.0 * mesh.area / (CLUSTERED * max_triangles))  # about two triangles a cube's face
+        mesh = trimesh.Trimesh(*clustered(mesh.vertices, mesh.faces, cube), process=False)
     if len(mesh.faces) > max_triangles:
         mesh = mesh.simplify_quadric_decimation(face_count=max_triangles)
     return Face(np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64))
+
+
+def clustered(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """((M, 3) mm vertices, (T, 3) triangles): the mesh with each cube_mm cube's vertices merged into
+    the first of them; triangles left with fewer than three corners, and repeats, dropped."""
+    _, first, inverse = np.unique(np.floor(vertices / cube_mm).astype(np.int64), axis=0, return_index=True, return_inverse=True)
+    merged = inverse.reshape(-1)[faces]
+    merged = merged[(merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])]
+    return np.array(vertices[first]), merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
 
 
 def rim_values_on(vertices: np.ndarray, rim: np.ndarray, values: np.ndarray, axis: np.ndarray) -> np.ndarray:
