@@ -331,3 +331,26 @@ def test_a_seal_on_the_side_of_a_deep_nose_gives_a_cushion_that_does_not_fold(re
     assert outward.min() > 0  # every flange point lies farther out than its rim point, none folded back
     solid, wall, folds = cushion_solid(cushion, normals)
     assert folds == 0 and wall >= WALL_TOLERANCE * CushionParams().wall_mm
+
+
+def test_the_seals_closest_skin_points_are_trimeshs_without_its_index_of_every_triangle():
+    """`contact._closest_on` on a capsule (85 mm long side triangles beside small ones at its ends,
+    corners jittered): the points and triangles `trimesh.proximity.closest_point` finds on the
+    whole mesh, to the bit, for points 0.5-3 mm off its side near one end (under 10 mm from their
+    nearest corner, ~75 mm from the far corners of the side triangles they lie over: a crop
+    without the longest edge loses those); and the surface keeps no r-tree of its triangles."""
+    from cpapfit.cushion.contact import _closest_on
+
+    rng = np.random.default_rng(5)
+    capsule = trimesh.creation.capsule(height=80.0, radius=30.0, count=[24, 24])
+    vertices = capsule.vertices + rng.normal(0.0, 0.3, capsule.vertices.shape)
+    surface = trimesh.Trimesh(vertices, capsule.faces, process=False)
+    whole = trimesh.Trimesh(vertices, capsule.faces, process=False)
+    angle, z = rng.uniform(0.0, 2 * np.pi, 300), rng.uniform(34.0, 39.0, 300)
+    off = 30.0 + rng.uniform(0.5, 3.0, 300)
+    points = np.column_stack([off * np.cos(angle), off * np.sin(angle), z])
+    nearest, tri = _closest_on(surface, points)
+    expected, _, expected_tri = trimesh.proximity.closest_point(whole, points)
+    np.testing.assert_array_equal(nearest, expected)
+    np.testing.assert_array_equal(tri, expected_tri)
+    assert "triangles_tree" not in surface._cache.cache and "triangles" not in surface._cache.cache

@@ -115,7 +115,7 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
         sample, facing = surface.vertices, None
         nearest = surface.vertices[surface.kdtree.query(points)[1]]
     else:
-        nearest, _, tri = trimesh.proximity.closest_point(surface, points)
+        nearest, tri = _closest_on(surface, points)
         winding = np.sign(np.einsum("ij,ij->i", np.asarray(surface.face_normals)[tri], normals).sum()) or 1.0
         hit, near = _hit_along(points, normals, surface, winding)
         used = np.unique(surface.faces)
@@ -127,6 +127,20 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
     if near.any():
         offset[near] = median_filter(offset[near], size=min(OUTLIER_SAMPLES, int(near.sum())), mode="wrap")
     return np.where(near[:, None], points + offset[:, None] * normals, points), near
+
+
+def _closest_on(surface: trimesh.Trimesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((K, 3) mm the surface's point nearest each of (K, 3) points, (K,) its triangle), as
+    `trimesh.proximity.closest_point` finds them, among only the triangles that can hold one: those
+    whose corners all lie within the farthest point's nearest-vertex distance of some point, give or
+    take their longest edge. The surface lives through the design, and a dense scan's r-tree of every
+    triangle would live with it."""
+    vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
+    reach = surface.kdtree.query(points)[0].max()
+    longest = np.max([np.linalg.norm(vertices[faces[:, k]] - vertices[faces[:, k - 1]], axis=1) for k in range(3)], axis=0)
+    near = np.flatnonzero(cKDTree(points).query(vertices)[0][faces].max(axis=1) <= reach + longest)
+    nearest, _, tri = trimesh.proximity.closest_point(trimesh.Trimesh(vertices, faces[near], process=False), points)
+    return nearest, near[tri]
 
 
 def faded_offsets(loop: np.ndarray, offset: np.ndarray, known: np.ndarray) -> np.ndarray:
