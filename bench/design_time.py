@@ -1,5 +1,5 @@
 """Wall-clock time of `cpapfit design` (the whole chain, as a user runs it) on a synthetic subject,
-on that subject's surface as a dense mesh (1.6 M triangles, PLY in metres: a structured-light or
+on that subject's surface as a dense mesh (1.08 M vertices, 2.1 M triangles, PLY in metres: a structured-light or
 photogrammetry scanner's output) and on the shared fran scan (skipped without ../shared), with
 the CPU time of the run (its processes' user + system time, which other jobs on the machine
 change far less), the load average when it started and the largest resident memory of any run
@@ -69,9 +69,9 @@ def stages(name: str, scan: str, mask: str, out: str) -> None:
 
 
 def dense_mesh(path: Path) -> None:
-    """Seed 3's true surface subdivided to 0.35 mm edges (~1.6 M triangles), written in metres."""
+    """Seed 3's true surface subdivided to 0.31 mm edges (1.08 M vertices, 2.1 M triangles), written in metres."""
     ph = make_phantom(3)
-    vertices, faces = trimesh.remesh.subdivide_to_size(ph.surface, ph.faces, 0.35)
+    vertices, faces = trimesh.remesh.subdivide_to_size(ph.surface, ph.faces, 0.31)
     trimesh.Trimesh(vertices / 1000.0, faces, process=False).export(path)
 
 
