@@ -120,7 +120,7 @@ class StockFitting:
     def comparison(self, asleep: bool = True, faces: dict[FaceState, Face] | None = None) -> StockComparison:
         """The `StockComparison`; `asleep`: the best size (and the gauge's) pressed in each sleep state
         too, on `faces` where already made (`state_faces`: the custom cushion's, on a mesh scan
-        hundreds of MB each)."""
+        hundreds of MB each; the gauge's size, pressed by a worker, on faces of its own)."""
         mask, face, params, fit_params = self.mask, self.face, self.params, self.fit_params
         done = dict(zip(self.sizes, self.seats.results()))
         sizes = tuple(sorted((fit for fit in done.values() if fit is not None), key=StockFit.rank))
@@ -132,7 +132,8 @@ class StockFitting:
         gauge_fit = compared.gauge_fit
         if not asleep:
             return compared
-        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge") if gauge_fit else None
+        here = faces if self.submit is at_once else None  # a worker makes its own, sharing their triangles as this process's do
+        gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge", here) if gauge_fit else None
         return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params, faces=faces),
                        gauge_states=gauge_states.result() if gauge_states else ())
 

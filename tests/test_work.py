@@ -62,13 +62,19 @@ def test_shared_work_at_once_is_done_in_order_as_it_is_made():
 def test_a_face_goes_to_a_worker_as_its_arrays_not_its_meshes_caches():
     """A process pool pickles what it is handed in a thread of its own while this process goes on
     filling the face's meshes' caches: the face must pickle as its meshes' arrays alone (a cache
-    growing while pickled stopped a design with "dictionary changed size during iteration")."""
+    growing while pickled stopped a design with "dictionary changed size during iteration"), and
+    its meshes come back with their normals (the same to the bit) and no other cache."""
     mesh = trimesh.creation.icosphere(2)
     face = Face(mesh, mesh.copy(), np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
     face.registered.kdtree, face.scan.triangles_tree  # caches filled, as a design's first queries fill them
     for sent in (face, Face(trimesh.PointCloud(mesh.vertices), mesh, face.axis, face.up)):
         back = pickle.loads(pickle.dumps(sent))
-        assert not back.scan._cache.cache and not back.registered._cache.cache
+        for mesh_back, mesh_sent in ((back.scan, sent.scan), (back.registered, sent.registered)):
+            if isinstance(mesh_sent, trimesh.Trimesh):
+                assert set(mesh_back._cache.cache) == {"face_normals", "vertex_normals"}
+                assert np.array_equal(mesh_back.vertex_normals, mesh_sent.vertex_normals)
+            else:
+                assert not mesh_back._cache.cache
         assert type(back.scan) is type(sent.scan) and np.array_equal(back.scan.vertices, sent.scan.vertices)
         assert np.array_equal(back.registered.faces, sent.registered.faces) and np.array_equal(back.axis, sent.axis)
 

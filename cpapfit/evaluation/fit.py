@@ -10,6 +10,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
+from ..normals import lean_mesh
 from ..template import load_template
 from .leak import leak_l_min
 from .mechanics import COS_MIN, N_PER_KPA_MM2, Flaps, Pressed, cpap_load_n, least_force_n, press, pull_n
@@ -213,8 +214,8 @@ def _arrays(mesh: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.
 
 
 def _mesh(vertices: np.ndarray, faces: np.ndarray | None) -> trimesh.Trimesh | trimesh.PointCloud:
-    """The mesh of `_arrays`' (vertices, triangles or None)."""
-    return trimesh.PointCloud(vertices) if faces is None else trimesh.Trimesh(vertices, faces, process=False)
+    """The mesh of `_arrays`' (vertices, triangles or None), its normals set (`normals.lean_mesh`)."""
+    return trimesh.PointCloud(vertices) if faces is None else lean_mesh(vertices, faces)
 
 
 def _face(scan_vertices, scan_faces, vertices, faces, axis, up) -> Face:
