@@ -128,7 +128,7 @@ def main() -> None:
                 walls.append(wall)
                 peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024**2
                 print(f"cpapfit design {name} --mask {mask}: {wall:.1f} s (process start to exit), CPU {cpu:.1f} s, "
-                      f"load {load:.1f}, peak memory so far {peak:.1f} GB")
+                      f"load {load:.1f}, peak memory so far {peak:.2f} GiB")
             print(f"  {name} {mask}: best {min(walls):.1f} s, median {statistics.median(walls):.1f} s")
             if args.stages:
                 stages(name, scan, mask, f"{tmp}/out")

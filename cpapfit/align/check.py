@@ -30,6 +30,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
+from ..crop import reachable
 from ..errors import InputError
 from ..landmarks.cloud import facing_surface
 from ..scan import Scan
@@ -181,9 +182,8 @@ def _along(surface: trimesh.Trimesh, at: np.ndarray, forward: np.ndarray, radius
     longest edge (a point in a triangle lies no farther than that from each corner). A dense head's
     Embree scene is not built for a few probes."""
     vertices, faces, across = np.asarray(surface.vertices), np.asarray(surface.faces), plane_across(forward).T
-    longest = np.max([np.linalg.norm(vertices[faces[:, k]] - vertices[faces[:, k - 1]], axis=1) for k in range(3)], axis=0)
-    distance = cKDTree(at @ across).query(vertices @ across)[0][faces].max(axis=1)
-    return trimesh.Trimesh(vertices, faces[distance <= radius_mm + longest], process=False)
+    near = reachable(vertices, faces, cKDTree(at @ across).query(vertices @ across)[0], radius_mm)
+    return trimesh.Trimesh(vertices, faces[near], process=False)
 
 
 def _disc() -> np.ndarray:

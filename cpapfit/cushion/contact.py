@@ -31,6 +31,7 @@ import trimesh
 from scipy.ndimage import gaussian_filter1d, median_filter
 from scipy.spatial import cKDTree
 
+from ..crop import reachable
 from ..frozen import freeze_arrays
 from ..template import Template, load_template
 
@@ -133,12 +134,10 @@ def _closest_on(surface: trimesh.Trimesh, points: np.ndarray) -> tuple[np.ndarra
     """((K, 3) mm the surface's point nearest each of (K, 3) points, (K,) its triangle), as
     `trimesh.proximity.closest_point` finds them, among only the triangles that can hold one: those
     whose corners all lie within the farthest point's nearest-vertex distance of some point, give or
-    take their longest edge. The surface lives through the design, and a dense scan's r-tree of every
-    triangle would live with it."""
+    take their longest edge (`crop.reachable`). The surface lives through the design, and a dense
+    scan's r-tree of every triangle would live with it."""
     vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
-    reach = surface.kdtree.query(points)[0].max()
-    longest = np.max([np.linalg.norm(vertices[faces[:, k]] - vertices[faces[:, k - 1]], axis=1) for k in range(3)], axis=0)
-    near = np.flatnonzero(cKDTree(points).query(vertices)[0][faces].max(axis=1) <= reach + longest)
+    near = reachable(vertices, faces, cKDTree(points).query(vertices)[0], surface.kdtree.query(points)[0].max())
     nearest, _, tri = trimesh.proximity.closest_point(trimesh.Trimesh(vertices, faces[near], process=False), points)
     return nearest, near[tri]
 
