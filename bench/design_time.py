@@ -1,6 +1,6 @@
 """Wall-clock time of `cpapfit design` (the whole chain, as a user runs it) on a synthetic subject,
-on that subject's surface as a dense mesh (1.08 M vertices, 2.1 M triangles, PLY in metres: a structured-light or
-photogrammetry scanner's output) and on the shared fran scan (skipped without ../shared), with
+on that subject's surface as a dense mesh (1.08 M vertices, 2.1 M triangles, PLY in metres: a
+structured-light or photogrammetry scanner's output) and on the shared fran scan (skipped without ../shared), with
 the CPU time of the run (its processes' user + system time, which other jobs on the machine
 change far less), the load average when it started and the largest resident memory of any run
 so far.

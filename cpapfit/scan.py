@@ -107,7 +107,7 @@ def scan_surface(scan: Scan, near: np.ndarray | None = None, reach_mm: float = n
     points `near`, only its part within `reach_mm` of one of them: a cloud's points, a mesh's
     triangles with a point that near (a corner within the reach and the triangle's longest edge)
     and its points that near with no triangle, in their order; the whole scan where nothing is that
-    near. A design builds it once and hands it to every stage, so that its r-tree and Embree scene
+    near. A design builds it once and hands it to every stage, so that its k-d tree and Embree scene
     are built once, over no more of the head than it needs."""
     vertices, faces = scan.vertices, scan.faces
     keep, kept = np.ones(len(vertices), dtype=bool), faces

@@ -334,23 +334,30 @@ def test_a_seal_on_the_side_of_a_deep_nose_gives_a_cushion_that_does_not_fold(re
 
 
 def test_the_seals_closest_skin_points_are_trimeshs_without_its_index_of_every_triangle():
-    """`contact._closest_on` on a capsule (85 mm long side triangles beside small ones at its ends,
-    corners jittered): the points and triangles `trimesh.proximity.closest_point` finds on the
-    whole mesh, to the bit, for points 0.5-3 mm off its side near one end (under 10 mm from their
-    nearest corner, ~75 mm from the far corners of the side triangles they lie over: a crop
-    without the longest edge loses those); and the surface keeps no r-tree of its triangles."""
+    """`contact._closest_on` on a capsule (85 mm long side triangles beside small ones on its caps,
+    corners jittered, and two vertices in no triangle): the points `trimesh.proximity.closest_point`
+    finds on the whole mesh, to the bit, each on a triangle at that distance, for points 0.5-3 mm off
+    its side near one end (~75 mm from the far corners of the side triangles they lie over: a crop
+    without the longest edge loses those), 5-15 mm off its cap (a crop without the farthest point's
+    distance loses theirs), and apart, 0.2 mm from the loose vertices (which hold no closest point:
+    a crop that reckons with them loses the cap's); and the surface keeps no r-tree of its triangles."""
     from cpapfit.cushion.contact import _closest_on
 
     rng = np.random.default_rng(5)
     capsule = trimesh.creation.capsule(height=80.0, radius=30.0, count=[24, 24])
-    vertices = capsule.vertices + rng.normal(0.0, 0.3, capsule.vertices.shape)
+    loose = np.array([[0.0, 0.0, 60.0], [3.0, 0.0, -62.0]])  # inside its caps, ~10 mm from their small triangles
+    vertices = np.vstack([capsule.vertices + rng.normal(0.0, 0.3, capsule.vertices.shape), loose])
     surface = trimesh.Trimesh(vertices, capsule.faces, process=False)
     whole = trimesh.Trimesh(vertices, capsule.faces, process=False)
     angle, z = rng.uniform(0.0, 2 * np.pi, 300), rng.uniform(34.0, 39.0, 300)
     off = 30.0 + rng.uniform(0.5, 3.0, 300)
-    points = np.column_stack([off * np.cos(angle), off * np.sin(angle), z])
-    nearest, tri = _closest_on(surface, points)
-    expected, _, expected_tri = trimesh.proximity.closest_point(whole, points)
-    np.testing.assert_array_equal(nearest, expected)
-    np.testing.assert_array_equal(tri, expected_tri)
+    side = np.column_stack([off * np.cos(angle), off * np.sin(angle), z])
+    up = rng.normal(size=(100, 3)) * [1.0, 1.0, 0.0] + [0.0, 0.0, 3.0]
+    cap = [0.0, 0.0, 40.0] + up / np.linalg.norm(up, axis=1, keepdims=True) * (30.0 + rng.uniform(5.0, 15.0, (100, 1)))
+    for points in (np.vstack([side, cap]), loose + [0.2, 0.0, 0.0]):
+        nearest, tri = _closest_on(surface, points)
+        expected, distance, _ = trimesh.proximity.closest_point(whole, points)
+        np.testing.assert_array_equal(nearest, expected)
+        on_triangle = trimesh.triangles.closest_point(whole.triangles[tri], points)
+        np.testing.assert_allclose(np.linalg.norm(on_triangle - points, axis=1), distance, atol=1e-9)
     assert "triangles_tree" not in surface._cache.cache and "triangles" not in surface._cache.cache

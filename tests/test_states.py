@@ -166,3 +166,16 @@ def test_the_report_gives_no_leak_figure_for_a_mask_the_cpap_load_lifts_off():
     table = states_table({"custom": {}, "states": [{"name": "awake", "custom": fit(0.25, False)}, {"name": "CPAP 20", "custom": fit(1809.2, True)}]})
     assert "mask off" in table and "1809" not in table and "lifted off: the CPAP load beats the straps" in table
     assert 'data-key="states.0.custom.leak_l_min"' in table
+
+
+def test_a_moved_face_shares_its_surfaces_vertex_triangle_table():
+    """A sleep state's moved surface (`states._moved_surface`) holds the unmoved surface's table of
+    each vertex's triangles (the same array, not a copy: hundreds of MB on a dense scan), which is
+    the table trimesh makes for it."""
+    from cpapfit.evaluation.states import _moved_surface
+
+    surface = trimesh.creation.icosphere(3, radius=50.0)
+    moved = _moved_surface(surface, np.full((len(surface.vertices), 3), 1.5))
+    assert np.shares_memory(moved.vertex_faces, surface.vertex_faces)
+    np.testing.assert_array_equal(moved.vertex_faces, trimesh.Trimesh(moved.vertices, moved.faces, process=False).vertex_faces)
+    np.testing.assert_array_equal(moved.vertices, surface.vertices + 1.5)

@@ -136,7 +136,7 @@ def _moved_surface(surface: trimesh.Trimesh | trimesh.PointCloud, move: np.ndarr
     if isinstance(surface, trimesh.PointCloud):
         return trimesh.PointCloud(points)
     mesh = lean_mesh(points, np.asarray(surface.faces))
-    mesh._cache["vertex_faces"] = surface.vertex_faces  # the same triangles: trimesh's own way to set a cached value
+    mesh._cache["vertex_faces"] = surface.vertex_faces  # the same triangles; trimesh's private cache (pinned 4.6.11), as its own setters fill it
     return mesh
 
 

@@ -13,8 +13,8 @@ from .. import __version__
 from ..align.nonrigid import Registration
 from ..cushion.contact import Contact
 from ..evaluation.fit import CushionFit
-from ..pipeline import Alignment, Design
 from ..memory import release
+from ..pipeline import Alignment, Design
 from ..render import Scene, scene_of
 from ..scan import Scan
 from ..template import load_template

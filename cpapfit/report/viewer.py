@@ -27,12 +27,13 @@ LIGHT = {"lighting": {"ambient": 0.25, "diffuse": 0.95, "specular": 0.05, "rough
 def viewer_face(face: Face, centre: np.ndarray, radius_mm: float = CROP_MM, max_triangles: int = MAX_TRIANGLES) -> Face:
     """The face cropped to triangles within radius_mm of `centre` (mm) and decimated (quadric error)
     to at most max_triangles; a crop of more than CLUSTERED times that many is first thinned to
-    about CLUSTERED times by vertex clustering (`clustered`)."""
+    CLUSTERED to about twice that many by vertex clustering (`clustered`)."""
     keep = (np.linalg.norm(face.vertices - centre, axis=1) < radius_mm)[face.faces].all(axis=1)
     mesh = trimesh.Trimesh(np.array(face.vertices), face.faces[keep], process=False)  # writable: the decimator needs it
     mesh.remove_unreferenced_vertices()
     if len(mesh.faces) > CLUSTERED * max_triangles:
-        cube = np.sqrt(2.0 * mesh.area / (CLUSTERED * max_triangles))  # about two triangles a cube's face
+        area = trimesh.triangles.area(mesh.vertices[mesh.faces]).sum()  # not the mesh's: its cache would outlive the crop
+        cube = np.sqrt(2.0 * area / (CLUSTERED * max_triangles))  # two triangles a cube's face on a flat face; more where it curves
         mesh = trimesh.Trimesh(*clustered(mesh.vertices, mesh.faces, cube), process=False)
     if len(mesh.faces) > max_triangles:
         mesh = mesh.simplify_quadric_decimation(face_count=max_triangles)
@@ -40,12 +41,13 @@ def viewer_face(face: Face, centre: np.ndarray, radius_mm: float = CROP_MM, max_
 
 
 def clustered(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """((M, 3) mm vertices, (T, 3) triangles): the mesh with each cube_mm cube's vertices merged into
-    the first of them; triangles left with fewer than three corners, and repeats, dropped."""
+    """((M, 3) mm vertices, (T, 3) int64 triangles): the mesh of (N, 3) mm `vertices` and (F, 3)
+    `faces` with each cube_mm cube's vertices merged into the first of them; triangles left with
+    fewer than three corners, and repeats, dropped."""
     _, first, inverse = np.unique(np.floor(vertices / cube_mm).astype(np.int64), axis=0, return_index=True, return_inverse=True)
     merged = inverse.reshape(-1)[faces]
     merged = merged[(merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])]
-    return np.array(vertices[first]), merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
+    return vertices[first], merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
 
 
 def rim_values_on(vertices: np.ndarray, rim: np.ndarray, values: np.ndarray, axis: np.ndarray) -> np.ndarray:
