@@ -127,3 +127,26 @@ def test_a_design_sets_every_stock_size_beside_it_best_first(designed):
     assert ("stock_gauge" in d.fits) == gauge and all(("stock_gauge" in s.fits) == gauge for s in d.states)
     if gauge:
         assert d.fits["stock_gauge"] is next(f.fit for f in sizes if f.size == d.stock.gauge)
+
+
+def test_with_no_worker_the_stock_sizes_press_on_the_faces_already_made(monkeypatch):
+    """Asleep, with no worker (`at_once`), the best size and the gauge's both press on the sleep-state
+    faces handed in (on a dense scan each moved face is hundreds of MB): no state face is made again,
+    and every state reads the same as on faces made anew."""
+    from cpapfit.evaluation import states
+    from cpapfit.stock_fit import fitting_stock
+
+    face = face_scaled(np.ones(3))
+    asleep = states.state_faces(face, states.sleep_states("nasal"))
+    made, make = [], states.state_face
+    monkeypatch.setattr(states, "state_face", lambda *args: made.append(1) or make(*args))
+    fitting = fitting_stock("nasal", face)  # its sizes seated once, for both comparisons
+    handed = fitting.comparison(faces=asleep)
+    assert made == [] and handed.states and handed.gauge_states
+    anew = fitting.comparison()
+    assert made
+    for ours, theirs in ((handed.states, anew.states), (handed.gauge_states, anew.gauge_states)):
+        assert [s.state for s in ours] == [s.state for s in theirs]
+        for a, b in zip(ours, theirs):
+            assert a.fits.keys() == b.fits.keys()
+            assert all(a.fits[k].summary() == b.fits[k].summary() for k in a.fits)
