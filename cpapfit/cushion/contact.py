@@ -133,10 +133,10 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
 def _closest_on(surface: trimesh.Trimesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((K, 3) mm the surface's point nearest each of (K, 3) points, (K,) a triangle holding it), as
     `trimesh.proximity.closest_point` finds them (the same points; on an edge or corner shared by
-    triangles, any of them), among only the triangles that can hold one: those whose corners all lie
-    within the farthest point's distance from the nearest corner of a triangle of some point, give or
-    take their longest edge (`crop.reachable`). The surface lives through the design, and a dense
-    scan's r-tree of every triangle would live with it."""
+    triangles, any of them), among only the triangles that can hold one (`crop.reachable`): those
+    whose corners all lie within R of some point, give or take their longest edge, R the farthest
+    any point lies from its nearest triangle corner. The surface lives through the design, and a
+    dense scan's r-tree of every triangle would live with it."""
     vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
     corners = vertices[np.unique(faces)]  # a vertex in no triangle holds no closest point
     near = reachable(vertices, faces, cKDTree(points).query(vertices)[0], cKDTree(corners).query(points)[0].max())
