@@ -59,10 +59,11 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
         "headgear_force_n": round(custom.force_n, 3),
         "headgear_force_about": "the custom cushion's: the force asked for (evaluate --force), else the recommended force (at "
                                 "which a cushion compensated for this face presses every covered rim point with the target pressure "
-                                "while balancing the CPAP load), raised where the sleep states are pressed (design, evaluate --states) "
-                                "to the least force that seals the awake face and each state at this CPAP pressure, but not past "
-                                f"the force at which the awake peak comes {PEAK_MARGIN_KPA:g} kPa under capillary closing "
-                                "(cpapfit.cushion.envelope); "
+                                "while balancing the CPAP load); where the sleep states are pressed (design, evaluate --states), "
+                                "the larger of that and the least force that seals the awake face and each state at this CPAP "
+                                f"pressure, held to the force at which the awake peak comes {PEAK_MARGIN_KPA:g} kPa under capillary "
+                                "closing (never below the awake seal force), then raised within that limit while more of the rim "
+                                "comes into the safe window (cpapfit.cushion.envelope); "
                                 "a stock cushion at the force a clinic sets for it (stock_fitting)",
         "window": params.describe(),
         **{name: fit.summary() for name, fit in fits.items()},

@@ -1,16 +1,18 @@
 """Fit evaluation: the physics on cases with known answers, then custom vs generic on synthetic subjects."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import trimesh
 from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
-from cpapfit.evaluation.fit import FitParams, fit_rim
+from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_rim, refined_preload
 from cpapfit.evaluation.leak import leak_l_min
 from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
 from cpapfit.evaluation.membrane import ROOT_MM
-from cpapfit.evaluation.rim import find_rim, _nearest_skin, _skin_below, _skin_planes
+from cpapfit.evaluation.rim import find_rim, seal_lengths, _nearest_skin, _skin_below, _skin_planes
 from cpapfit.evaluation.tissue import stiffness
 from cpapfit.pipeline import face_for
 
@@ -88,6 +90,39 @@ def test_rim_of_a_flat_ring_on_a_plane():
     assert rim.clearance == pytest.approx(np.full(256, 3.0), abs=1e-6)
     assert rim.sealed_area_mm2 == pytest.approx(np.pi * RING_MM**2, rel=0.01)
     assert rim.ds.sum() == pytest.approx(2 * np.pi * RING_MM, rel=0.01)
+
+
+def test_a_rim_jumping_between_its_flanges_edges_seals_no_longer_a_stretch():
+    """A rim's seal length: a smooth loop's own length (an ellipse 80 x 60 mm, within 0.5 %); where
+    the sectors' rim points jump between a flange's inner and outer edge (5 mm apart, every other
+    sector over 20 of 256) the seal is not 80 mm longer for it (within 2.5 % of the smooth rim)."""
+    t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    a, b = 40.0, 30.0
+    ellipse = np.column_stack([a * np.cos(t), b * np.sin(t), np.zeros_like(t)])
+    h = ((a - b) / (a + b)) ** 2
+    assert seal_lengths(ellipse).sum() == pytest.approx(np.pi * (a + b) * (1 + 3 * h / (10 + np.sqrt(4 - 3 * h))), rel=0.005)
+    circle = np.column_stack([RING_MM * np.cos(t), RING_MM * np.sin(t), np.zeros_like(t)])
+    jumping = circle.copy()
+    jumping[100:120:2] *= (RING_MM + 5.0) / RING_MM
+    assert np.linalg.norm(np.diff(jumping, axis=0), axis=1).sum() > 2 * np.pi * RING_MM + 80  # point to point
+    assert seal_lengths(jumping).sum() == pytest.approx(2 * np.pi * RING_MM, rel=0.025)
+
+
+def test_the_preload_is_corrected_where_the_flanges_outer_edge_presses():
+    """Pressing the compensated cushion once corrects each seal point's pre-load by its own
+    sector's rim point, wherever across the flange that lies: an outer edge 5 mm out pressing 5 kPa
+    lowers the pre-load there by the full step against the rest of the rim (pressing the target)."""
+    t = np.linspace(0, 2 * np.pi, 128, endpoint=False)
+    curve = np.column_stack([RING_MM * np.cos(t), RING_MM * np.sin(t), np.zeros_like(t)])
+    s = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    radius = np.where(np.abs(np.angle(np.exp(1j * s))) < 0.3, RING_MM + 5.0, RING_MM)  # the outer edge around angle 0
+    points = np.column_stack([radius * np.cos(s), radius * np.sin(s), np.zeros_like(s)])
+    rim = SimpleNamespace(points=points, covered=np.ones(256, dtype=bool), cos=np.ones(256), axis=np.array([0.0, 0.0, 1.0]))
+    params = FitParams()
+    pressure = np.where(radius > RING_MM, 5.0, params.target_kpa)
+    fit = SimpleNamespace(rim=rim, stiffness=SimpleNamespace(effective=np.full(256, 0.9)), pressure_kpa=pressure)
+    preload = refined_preload(np.zeros(128), curve, fit, 3.0, params)
+    assert preload[0] == 0.0 and preload[64] == pytest.approx(STEP_MM, abs=0.05)
 
 
 def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():

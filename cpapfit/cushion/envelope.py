@@ -33,7 +33,7 @@ from .contact import Contact, closed_resample
 from .generic import NOSE_TIP
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion, flap_directions
 from .solid import with_membrane
-from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_force
+from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_force, window_force
 from ..evaluation.membrane import reach_mm, width_for
 from ..evaluation.rim import SECTORS
 from ..solids import self_intersecting_edges
@@ -69,14 +69,17 @@ def needed_reach(states: tuple[StateFit, ...], awake: CushionFit, awake_kpa: flo
 
 
 def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitParams) -> float:
-    """N: the headgear force the custom cushion is set to: the recommended force (`awake.force_n`,
-    the even target pressure's), raised to the least that seals the awake face and each state at
-    the awake CPAP pressure (their seal forces; one that no force up to the limit seals asks for
-    the most allowed), but not past the force at which the awake peak comes PEAK_MARGIN_KPA under
-    the capillary closing pressure."""
+    """N: the headgear force the custom cushion is set to: the larger of the recommended force
+    (`awake.force_n`, the even target pressure's) and the least that seals the awake face and each
+    state at the awake CPAP pressure (their seal forces; one that no force up to the limit seals
+    asks for the most allowed), held to the force at which the awake peak comes PEAK_MARGIN_KPA
+    under the capillary closing pressure but never below the awake seal force; then raised within
+    that limit to the least force that keeps the most of the awake rim in the safe window."""
     most = peak_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params, params.capillary_kpa - PEAK_MARGIN_KPA)
     need = [awake.seal_force_n] + [s.fits["custom"].seal_force_n for s in states if s.state.cpap_cmh2o is None and "custom" in s.fits]
-    return max(awake.force_n, min(max([most if f is None else f for f in need]), most))
+    sealed = most if awake.seal_force_n is None else awake.seal_force_n
+    force = max(min(max([awake.force_n] + [most if f is None else f for f in need]), most), sealed)
+    return window_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params, force, most)
 
 
 def column_need(need: dict[float, np.ndarray], rim: np.ndarray, contact: Contact) -> dict[float, np.ndarray]:

@@ -15,12 +15,13 @@ from ..template import load_template
 from .leak import leak_l_min
 from .mechanics import COS_MIN, N_PER_KPA_MM2, Flaps, Pressed, cpap_load_n, least_force_n, press, pull_n
 from .membrane import reach_mm, root_pull_kpa_mm
-from .rim import RimContact, find_rim
+from .rim import RimContact, find_rim, in_plane
 from .tissue import Stiffness, TissueModel, stiffness
 
 KPA_PER_CMH2O = 0.0980665
 MAX_PRELOAD_MM = 5.0  # the most the rim is set into the skin anywhere
-STEP_MM, NEAR_MM = 1.0, 3.0  # a correction moves a seal point at most this far, from rim points this close
+STEP_MM = 1.0  # a correction moves a seal point at most this far
+NEAR_RAD = 0.05  # from the rim point within this angle about the axis (3 degrees)
 MMHG_PER_KPA = 7.50062
 
 
@@ -170,6 +171,20 @@ def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     return _bisected(lambda force: not over(force), _least_force(rim, width_mm, params.cpap_kpa, flaps), params.max_force_n, tol_n)[0]
 
 
+def window_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, lo_n: float, hi_n: float, steps: int = 16) -> float:
+    """N: the least headgear force from `lo_n` to `hi_n` (`steps` + 1 even steps) at which the most
+    covered rim points press within the safe window."""
+    flaps = _flaps(rim, params.cpap_kpa)
+    low, high = params.window_kpa
+
+    def share(force: float) -> float:
+        p = _press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps).pressure_kpa
+        return float(((p >= low) & (p <= high)).mean())
+
+    forces = np.linspace(lo_n, max(hi_n, lo_n), steps + 1)
+    return float(forces[np.argmax([share(f) for f in forces])])
+
+
 def _bisected(below: Callable[[float], bool], lo: float, hi: float, tol_n: float) -> tuple[float, float]:
     """(lo, hi) N within `tol_n` of where `below(force)`, true up to a force and false past it, turns false."""
     while hi - lo > tol_n:
@@ -282,10 +297,16 @@ def refined_preload(preload: np.ndarray, curve: np.ndarray, fit: CushionFit, smo
     """The pre-load (K,) mm along `curve` (K, 3) corrected by what pressing the cushion built with
     it gave (`fit`): each point goes deeper by (target - pressure) / axial stiffness."""
     c = fit.rim.covered
-    dist, near = cKDTree(fit.rim.points[c]).query(curve)
+    centre = fit.rim.points.mean(axis=0)
+    dist, near = cKDTree(_around(fit.rim.points[c], centre, fit.rim.axis)).query(_around(curve, centre, fit.rim.axis))
     axial = fit.stiffness.effective[c][near] * np.maximum(fit.rim.cos[c][near], COS_MIN)
-    correction = np.where(dist <= NEAR_MM, (params.target_kpa - fit.pressure_kpa[c][near]) / axial, 0.0)
+    correction = np.where(dist <= NEAR_RAD, (params.target_kpa - fit.pressure_kpa[c][near]) / axial, 0.0)
     return _bounded(preload + gaussian_filter1d(np.clip(correction, -STEP_MM, STEP_MM), smoothing, mode="wrap"))
+
+
+def _around(points: np.ndarray, centre: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(K, 2): where (K, 3) mm points lie around the unit `axis` through `centre`, as unit vectors across it."""
+    return trimesh.util.unitize((points - centre) @ in_plane(axis, np.eye(3)[np.argmin(np.abs(axis))]).T)
 
 
 def _bounded(preload: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ from itertools import chain
 
 import numpy as np
 import trimesh
+from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
@@ -33,6 +34,7 @@ REACH_MM = 60.0  # rays look this far up (rims pressed into the skin) and down t
 CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
 CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
 TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's rim point
+LENGTH_SECTORS = 3.0  # the rim's length is read along its points smoothed over this many sectors (Gaussian)
 FACE_MM = 4.0  # scanned skin farther than this behind the registered face along the ray: a hole in the scan
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
@@ -54,8 +56,8 @@ class RimContact:
     reads points under a sheet seen from one side only as in the air; NaN where no skin was found
     along the axis, i.e. not covered); cos: (K,) |cos| of the angle between the axis and the normal
     of the skin the clearance is measured to (the scan's, averaged over NORMAL_MM; the registered
-    template's where the scan has too little there); ds: (K,) mm of rim length each point stands
-    for; uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area
+    template's where the scan has too little there); ds: (K,) mm of seal length each point stands
+    for (`seal_lengths`); uv: (K, 2) mm in-plane position about the rim's centre (side, up); sealed_area_mm2: area
     inside the rim, across the axis;
     membrane_mm, membrane_thickness_mm: (K,) width and thickness of the membrane at each rim point
     (0: none)."""
@@ -174,7 +176,7 @@ def rim_in(
     cos = np.abs(_skin_planes(skin, scan)[0] @ axis)
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
     clearance, cos = _nearest_skin(pts, clearance, cos, scan, axis)
-    return RimContact(pts, skin, clearance, cos, _arc_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
+    return RimContact(pts, skin, clearance, cos, seal_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
 def _sector(uv: np.ndarray, sectors: int) -> np.ndarray:
@@ -418,8 +420,13 @@ def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointClo
     return out, tri
 
 
-def _arc_lengths(loop: np.ndarray) -> np.ndarray:
-    """(K,) half the distance to each neighbour along a closed (K, 3) loop (sums to its length)."""
+def seal_lengths(rim: np.ndarray) -> np.ndarray:
+    """(K,) mm of seal each point of a closed (K, 3) rim, one point a sector, stands for: half the
+    distance to each neighbour along the rim smoothed over LENGTH_SECTORS (Gaussian). Where a
+    flange meets skin sloping across it, its inner and outer edges press nearly as deep and the
+    sectors' rim points jump between them; the seal, and the flange's contact with the skin,
+    does not grow longer for that."""
+    loop = gaussian_filter1d(rim, LENGTH_SECTORS, axis=0, mode="wrap")
     step = np.linalg.norm(np.roll(loop, -1, axis=0) - loop, axis=1)
     return 0.5 * (step + np.roll(step, 1))
 
