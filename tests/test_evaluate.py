@@ -8,11 +8,11 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
-from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_rim, refined_preload
+from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_rim, refined_preload, window_force
 from cpapfit.evaluation.leak import leak_l_min
 from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
 from cpapfit.evaluation.membrane import ROOT_MM
-from cpapfit.evaluation.rim import find_rim, seal_lengths, _nearest_skin, _skin_below, _skin_planes
+from cpapfit.evaluation.rim import RimContact, find_rim, seal_lengths, _nearest_skin, _skin_below, _skin_planes
 from cpapfit.evaluation.tissue import stiffness
 from cpapfit.pipeline import face_for
 
@@ -123,6 +123,30 @@ def test_the_preload_is_corrected_where_the_flanges_outer_edge_presses():
     fit = SimpleNamespace(rim=rim, stiffness=SimpleNamespace(effective=np.full(256, 0.9)), pressure_kpa=pressure)
     preload = refined_preload(np.zeros(128), curve, fit, 3.0, params)
     assert preload[0] == 0.0 and preload[64] == pytest.approx(STEP_MM, abs=0.05)
+
+
+def test_the_window_force_is_the_least_that_keeps_the_most_of_the_rim_in_the_window():
+    """A flat rim whose quarter stands 1 mm off the skin: at the least force that holds it on, the
+    quarter presses under the window; `window_force` raises the force, within its bounds, to the
+    least of its steps at which the most of the rim lies in the window (checked on a finer grid:
+    no force in the bounds keeps more than one step's worth more)."""
+    uv = ring_uv()
+    points = np.column_stack([uv, np.zeros(K)])
+    clearance = np.where(np.arange(K) < K // 4, 1.0, 0.0)
+    zeros = np.zeros(K)
+    rim = RimContact(points, points, clearance, np.ones(K), np.full(K, AREA / 5.0), uv, np.array([0.0, 0.0, 1.0]),
+                     np.pi * RING_MM**2, zeros, zeros)
+    k, params = np.full(K, 0.9), FitParams()
+    low, high = params.window_kpa
+
+    def share(force):
+        p = press(clearance, np.ones(K), np.full(K, AREA), k, uv, np.pi * RING_MM**2, force, params.cpap_kpa).pressure_kpa
+        return ((p >= low) & (p <= high)).mean()
+
+    lo, hi = 3.0, 12.0
+    force = window_force(rim, k, 5.0, params, lo, hi)
+    assert share(lo) < 0.8 and share(force) == 1.0
+    assert force == pytest.approx(min(f for f in np.linspace(lo, hi, 17) if share(f) == 1.0))
 
 
 def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():
