@@ -62,8 +62,8 @@ def evaluation_record(fits: dict, params: FitParams) -> dict:
                                 "while balancing the CPAP load); where the sleep states are pressed (design, evaluate --states), "
                                 "the larger of that and the least force that seals the awake face and each state at this CPAP "
                                 f"pressure, held to the force at which the awake peak comes {PEAK_MARGIN_KPA:g} kPa under capillary "
-                                "closing (never below the awake seal force), then raised within that limit while more of the rim "
-                                "comes into the safe window (cpapfit.cushion.envelope); "
+                                "closing (never below the awake seal force), then raised within that limit to the least force (of 16 "
+                                "steps) that keeps the most of the rim in the safe window (cpapfit.cushion.envelope); "
                                 "a stock cushion at the force a clinic sets for it (stock_fitting)",
         "window": params.describe(),
         **{name: fit.summary() for name, fit in fits.items()},

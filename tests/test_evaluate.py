@@ -8,7 +8,8 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
-from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_rim, refined_preload, window_force
+from cpapfit.cushion.envelope import PEAK_MARGIN_KPA, headgear_force
+from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_rim, peak_force, refined_preload, window_force
 from cpapfit.evaluation.leak import leak_l_min
 from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
 from cpapfit.evaluation.membrane import ROOT_MM
@@ -110,43 +111,73 @@ def test_a_rim_jumping_between_its_flanges_edges_seals_no_longer_a_stretch():
 
 def test_the_preload_is_corrected_where_the_flanges_outer_edge_presses():
     """Pressing the compensated cushion once corrects each seal point's pre-load by its own
-    sector's rim point, wherever across the flange that lies: an outer edge 5 mm out pressing 5 kPa
-    lowers the pre-load there by the full step against the rest of the rim (pressing the target)."""
+    sector's rim point, wherever across the 5 mm flange that lies: an outer edge 5 mm out pressing
+    5 kPa lowers the pre-load there by the full step against the rest of the rim (pressing the
+    target); a rim point 12 mm out, beyond the flange and NEAR_MM, corrects nothing."""
     t = np.linspace(0, 2 * np.pi, 128, endpoint=False)
     curve = np.column_stack([RING_MM * np.cos(t), RING_MM * np.sin(t), np.zeros_like(t)])
     s = np.linspace(0, 2 * np.pi, 256, endpoint=False)
     radius = np.where(np.abs(np.angle(np.exp(1j * s))) < 0.3, RING_MM + 5.0, RING_MM)  # the outer edge around angle 0
+    radius[np.abs(s - np.pi) < 0.3] = RING_MM + 12.0  # and a wall point far off the flange around angle pi
     points = np.column_stack([radius * np.cos(s), radius * np.sin(s), np.zeros_like(s)])
     rim = SimpleNamespace(points=points, covered=np.ones(256, dtype=bool), cos=np.ones(256), axis=np.array([0.0, 0.0, 1.0]))
     params = FitParams()
     pressure = np.where(radius > RING_MM, 5.0, params.target_kpa)
-    fit = SimpleNamespace(rim=rim, stiffness=SimpleNamespace(effective=np.full(256, 0.9)), pressure_kpa=pressure)
+    fit = SimpleNamespace(rim=rim, stiffness=SimpleNamespace(effective=np.full(256, 0.9)), pressure_kpa=pressure, contact_width_mm=5.0)
     preload = refined_preload(np.zeros(128), curve, fit, 3.0, params)
     assert preload[0] == 0.0 and preload[64] == pytest.approx(STEP_MM, abs=0.05)
 
 
-def test_the_window_force_is_the_least_that_keeps_the_most_of_the_rim_in_the_window():
-    """A flat rim whose quarter stands 1 mm off the skin: at the least force that holds it on, the
-    quarter presses under the window; `window_force` raises the force, within its bounds, to the
-    least of its steps at which the most of the rim lies in the window (checked on a finer grid:
-    no force in the bounds keeps more than one step's worth more)."""
+def dipped_ring() -> RimContact:
+    """A flat rim of K points on a flat face, its first quarter standing 1 mm off the skin."""
     uv = ring_uv()
     points = np.column_stack([uv, np.zeros(K)])
     clearance = np.where(np.arange(K) < K // 4, 1.0, 0.0)
     zeros = np.zeros(K)
-    rim = RimContact(points, points, clearance, np.ones(K), np.full(K, AREA / 5.0), uv, np.array([0.0, 0.0, 1.0]),
-                     np.pi * RING_MM**2, zeros, zeros)
-    k, params = np.full(K, 0.9), FitParams()
+    return RimContact(points, points, clearance, np.ones(K), np.full(K, AREA / 5.0), uv, np.array([0.0, 0.0, 1.0]),
+                      np.pi * RING_MM**2, zeros, zeros)
+
+
+def window_share(rim: RimContact, k: np.ndarray, force_n: float, params: FitParams) -> float:
+    """The share of `rim`'s points pressing within the safe window at `force_n` N (5 mm flange)."""
+    p = press(rim.clearance, rim.cos, 5.0 * rim.ds, k, rim.uv, rim.sealed_area_mm2, force_n, params.cpap_kpa).pressure_kpa
     low, high = params.window_kpa
+    return float(((p >= low) & (p <= high)).mean())
 
-    def share(force):
-        p = press(clearance, np.ones(K), np.full(K, AREA), k, uv, np.pi * RING_MM**2, force, params.cpap_kpa).pressure_kpa
-        return ((p >= low) & (p <= high)).mean()
 
+def test_the_window_force_is_the_least_that_keeps_the_most_of_the_rim_in_the_window():
+    """The dipped ring: at the least force that holds it on, its raised quarter presses under the
+    window; `window_force` raises the force, within its bounds, to the least of its steps at which
+    the most of the rim lies in the window; with no room above its lower bound it keeps that."""
+    rim, k, params = dipped_ring(), np.full(K, 0.9), FitParams()
     lo, hi = 3.0, 12.0
     force = window_force(rim, k, 5.0, params, lo, hi)
-    assert share(lo) < 0.8 and share(force) == 1.0
-    assert force == pytest.approx(min(f for f in np.linspace(lo, hi, 17) if share(f) == 1.0))
+    assert window_share(rim, k, lo, params) < 0.8 and window_share(rim, k, force, params) == 1.0
+    assert force == pytest.approx(min(f for f in np.linspace(lo, hi, 17) if window_share(rim, k, f, params) == 1.0))
+    assert window_force(rim, k, 5.0, params, hi, lo) == hi
+
+
+def test_the_headgear_force_seals_within_the_awake_peak_limit_and_is_raised_for_the_window():
+    """`headgear_force` on the dipped ring (`most`: where its peak reaches the limit): the
+    recommended force held to `most`; an awake seal force past `most` kept (sealing comes first);
+    no force that seals awake, or a state no force seals, asks for `most`; a low recommended force
+    raised to the least that puts the whole rim in the window."""
+    rim, k, params = dipped_ring(), np.full(K, 0.9), FitParams()
+    most = peak_force(rim, k, 5.0, params, params.capillary_kpa - PEAK_MARGIN_KPA)
+
+    def awake(force_n, seal_n):
+        return SimpleNamespace(rim=rim, stiffness=SimpleNamespace(effective=k), contact_width_mm=5.0, force_n=force_n, seal_force_n=seal_n)
+
+    def state(seal_n):
+        return SimpleNamespace(state=SimpleNamespace(cpap_cmh2o=None), fits={"custom": SimpleNamespace(seal_force_n=seal_n)})
+
+    assert window_share(rim, k, 3.0, params) < 0.8 and 5.0 < most < 8.0
+    assert headgear_force(awake(most + 2.0, 1.0), (), params) == pytest.approx(most)
+    assert headgear_force(awake(3.0, most + 1.0), (), params) == pytest.approx(most + 1.0)
+    assert headgear_force(awake(3.0, None), (), params) == pytest.approx(most)
+    assert headgear_force(awake(3.0, 1.0), (state(None),), params) == pytest.approx(most)
+    raised = headgear_force(awake(3.0, 1.0), (state(2.0),), params)
+    assert 3.0 < raised <= most and window_share(rim, k, raised, params) == 1.0
 
 
 def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():

@@ -124,10 +124,11 @@ def test_every_sleep_state_is_pressed_and_a_mask_10_mm_off_leaks(designed, place
 
 
 def test_the_headgear_force_seals_within_the_awake_peak_limit_and_keeps_the_most_of_the_rim_in_the_window(designed):
-    """The custom cushion's force seals the awake face; wherever that allows, it presses the awake
-    peak at most PEAK_MARGIN_KPA under capillary closing (the recommended force too is held to
-    that); short of the limit every state at the awake pressure seals at it; and no force from it
-    up to the limit keeps more of the rim in the window (by 2 %: it is searched in 16 steps)."""
+    """On the suite's designs, the custom cushion's force seals the awake face; wherever that
+    allows, it presses the awake peak at most PEAK_MARGIN_KPA under capillary closing; short of the
+    limit every state at the awake pressure seals at it; and no force from it up to the limit keeps
+    more of the rim in the window (by 2 %: it is searched in 16 steps). The rule's cases, each:
+    `test_evaluate`."""
     _, d = designed
     awake, params = d.fits["custom"], d.fit_params
     limit, peak = params.capillary_kpa - PEAK_MARGIN_KPA, awake.summary()["pressure_max_kpa"]
@@ -136,7 +137,8 @@ def test_the_headgear_force_seals_within_the_awake_peak_limit_and_keeps_the_most
     if awake.seal_force_n <= most:
         assert awake.force_n <= most + 1e-9 and peak <= limit + 0.01
     window = awake.summary()["window_fraction"]
-    assert all(at_force(awake, f, params).summary()["window_fraction"] <= window + 0.02 for f in np.linspace(awake.force_n, most, 9))
+    if awake.force_n < most:
+        assert all(at_force(awake, f, params).summary()["window_fraction"] <= window + 0.02 for f in np.linspace(awake.force_n, most, 9))
     if peak < limit - 0.05:  # not held by the peak
         for s in d.states:
             if s.state.cpap_cmh2o is None:

@@ -76,9 +76,9 @@ def headgear_force(awake: CushionFit, states: tuple[StateFit, ...], params: FitP
     under the capillary closing pressure but never below the awake seal force; then raised within
     that limit to the least force that keeps the most of the awake rim in the safe window."""
     most = peak_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params, params.capillary_kpa - PEAK_MARGIN_KPA)
-    need = [awake.seal_force_n] + [s.fits["custom"].seal_force_n for s in states if s.state.cpap_cmh2o is None and "custom" in s.fits]
-    sealed = most if awake.seal_force_n is None else awake.seal_force_n
-    force = max(min(max([awake.force_n] + [most if f is None else f for f in need]), most), sealed)
+    seals = [awake.seal_force_n] + [s.fits["custom"].seal_force_n for s in states if s.state.cpap_cmh2o is None and "custom" in s.fits]
+    need = [most if f is None else f for f in seals]
+    force = max(min(max([awake.force_n, *need]), most), need[0])
     return window_force(awake.rim, awake.stiffness.effective, awake.contact_width_mm, params, force, most)
 
 

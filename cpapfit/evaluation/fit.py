@@ -21,7 +21,8 @@ from .tissue import Stiffness, TissueModel, stiffness
 KPA_PER_CMH2O = 0.0980665
 MAX_PRELOAD_MM = 5.0  # the most the rim is set into the skin anywhere
 STEP_MM = 1.0  # a correction moves a seal point at most this far
-NEAR_RAD = 0.05  # from the rim point within this angle about the axis (3 degrees)
+NEAR_RAD = 0.05  # from the rim point in its direction about the axis: unit vectors across it this close (~3 degrees apart)
+NEAR_MM = 3.0  # and no farther from the seal point than the flange's width and this
 MMHG_PER_KPA = 7.50062
 
 
@@ -173,7 +174,9 @@ def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
 
 def window_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParams, lo_n: float, hi_n: float, steps: int = 16) -> float:
     """N: the least headgear force from `lo_n` to `hi_n` (`steps` + 1 even steps) at which the most
-    covered rim points press within the safe window."""
+    covered rim points press within the safe window; `lo_n` where `hi_n` is no more."""
+    if hi_n <= lo_n:
+        return lo_n
     flaps = _flaps(rim, params.cpap_kpa)
     low, high = params.window_kpa
 
@@ -181,7 +184,7 @@ def window_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitPar
         p = _press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps).pressure_kpa
         return float(((p >= low) & (p <= high)).mean())
 
-    forces = np.linspace(lo_n, max(hi_n, lo_n), steps + 1)
+    forces = np.linspace(lo_n, hi_n, steps + 1)
     return float(forces[np.argmax([share(f) for f in forces])])
 
 
@@ -295,12 +298,16 @@ def compensating_preload(
 
 def refined_preload(preload: np.ndarray, curve: np.ndarray, fit: CushionFit, smoothing: float, params: FitParams = FitParams()) -> np.ndarray:
     """The pre-load (K,) mm along `curve` (K, 3) corrected by what pressing the cushion built with
-    it gave (`fit`): each point goes deeper by (target - pressure) / axial stiffness."""
+    it gave (`fit`): each point goes deeper by (target - pressure) / axial stiffness at the covered
+    rim point in its direction about the axis (within NEAR_RAD), wherever across the flange that
+    lies (within its width and NEAR_MM of the point); none where there is no such rim point."""
     c = fit.rim.covered
     centre = fit.rim.points.mean(axis=0)
-    dist, near = cKDTree(_around(fit.rim.points[c], centre, fit.rim.axis)).query(_around(curve, centre, fit.rim.axis))
+    turn, near = cKDTree(_around(fit.rim.points[c], centre, fit.rim.axis)).query(_around(curve, centre, fit.rim.axis))
+    apart = np.linalg.norm(fit.rim.points[c][near] - curve, axis=1)
     axial = fit.stiffness.effective[c][near] * np.maximum(fit.rim.cos[c][near], COS_MIN)
-    correction = np.where(dist <= NEAR_RAD, (params.target_kpa - fit.pressure_kpa[c][near]) / axial, 0.0)
+    on = (turn <= NEAR_RAD) & (apart <= fit.contact_width_mm + NEAR_MM)
+    correction = np.where(on, (params.target_kpa - fit.pressure_kpa[c][near]) / axial, 0.0)
     return _bounded(preload + gaussian_filter1d(np.clip(correction, -STEP_MM, STEP_MM), smoothing, mode="wrap"))
 
 
