@@ -34,7 +34,7 @@ REACH_MM = 60.0  # rays look this far up (rims pressed into the skin) and down t
 CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
 CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
 TIE_MM = 0.1  # clearances this close count as equal when choosing a sector's rim point
-LENGTH_SECTORS = 3.0  # the seal's length and the area it closes are read along the rim smoothed over this many sectors (Gaussian, `_seal_line`)
+LENGTH_SECTORS = 3.0  # the rim's length is read along its points smoothed over this many sectors (Gaussian)
 FACE_MM = 4.0  # scanned skin farther than this behind the registered face along the ray: a hole in the scan
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
@@ -176,8 +176,7 @@ def rim_in(
     cos = np.abs(_skin_planes(skin, scan)[0] @ axis)
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
     clearance, cos = _nearest_skin(pts, clearance, cos, scan, axis)
-    line = _seal_line(pts, axis, up)
-    return RimContact(pts, skin, clearance, cos, _arc_lengths(line), rim_uv, axis, _area((line - line.mean(axis=0)) @ plane.T), *membrane)
+    return RimContact(pts, skin, clearance, cos, seal_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
 def _sector(uv: np.ndarray, sectors: int) -> np.ndarray:
@@ -421,30 +420,13 @@ def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointClo
     return out, tri
 
 
-def seal_lengths(rim: np.ndarray, axis: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(K,) mm of seal each point of a closed (K, 3) rim, one point a sector about the unit `axis`
-    (`up` the head's up direction), stands for: half the distance to each neighbour along its `_seal_line`."""
-    return _arc_lengths(_seal_line(rim, axis, up))
-
-
-def _seal_line(rim: np.ndarray, axis: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(K, 3) mm: the seal a closed (K, 3) rim of one point a sector about the unit `axis` runs
-    along: each point's distance from the rim's centre across the axis and its height along it
-    smoothed over LENGTH_SECTORS (Gaussian), its direction kept (a round rim stays as it is).
-    Where a flange meets skin sloping across it, its inner and outer edges press nearly as deep
-    and the sectors' rim points jump between them; the seal, the flange's contact with the skin
-    and the area it closes do not grow for that."""
-    centre = rim.mean(axis=0)
-    plane = in_plane(axis, up)
-    uv = (rim - centre) @ plane.T
-    radius = np.linalg.norm(uv, axis=1)
-    smooth = gaussian_filter1d(np.column_stack([radius, (rim - centre) @ axis]), LENGTH_SECTORS, axis=0, mode="wrap")
-    across = uv / np.maximum(radius, 1e-12)[:, None] * smooth[:, :1]
-    return centre + across @ plane + np.outer(smooth[:, 1], axis)
-
-
-def _arc_lengths(loop: np.ndarray) -> np.ndarray:
-    """(K,) half the distance to each neighbour along a closed (K, 3) loop (sums to its length)."""
+def seal_lengths(rim: np.ndarray) -> np.ndarray:
+    """(K,) mm of seal each point of a closed (K, 3) rim, one point a sector, stands for: half the
+    distance to each neighbour along the rim smoothed over LENGTH_SECTORS (Gaussian). Where a
+    flange meets skin sloping across it, its inner and outer edges press nearly as deep and the
+    sectors' rim points jump between them; the seal, and the flange's contact with the skin,
+    does not grow longer for that."""
+    loop = gaussian_filter1d(rim, LENGTH_SECTORS, axis=0, mode="wrap")
     step = np.linalg.norm(np.roll(loop, -1, axis=0) - loop, axis=1)
     return 0.5 * (step + np.roll(step, 1))
 
