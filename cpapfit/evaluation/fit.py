@@ -11,11 +11,12 @@ from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
 from ..normals import lean_mesh
+from ..tangents import plane_across
 from ..template import load_template
 from .leak import leak_l_min
 from .mechanics import COS_MIN, N_PER_KPA_MM2, Flaps, Pressed, cpap_load_n, least_force_n, press, pull_n
 from .membrane import reach_mm, root_pull_kpa_mm
-from .rim import RimContact, find_rim, in_plane
+from .rim import RimContact, find_rim
 from .tissue import Stiffness, TissueModel, stiffness
 
 KPA_PER_CMH2O = 0.0980665
@@ -85,7 +86,6 @@ class CushionFit:
         """The numbers of fit.json for this cushion (over the covered rim)."""
         c = self.rim.covered
         p = self.pressure_kpa[c]
-        lo, hi = self.window_kpa
         top = int(np.argmax(p))
         gap = self.rim.clearance[c] - self.rim.clearance[c].min()
         return {
@@ -95,7 +95,7 @@ class CushionFit:
             "pressure_max_kpa": float(p[top]),
             "pressure_max_mmhg": float(p[top] * MMHG_PER_KPA),
             "pressure_max_region": self.stiffness.region[np.flatnonzero(c)[top]],
-            "window_fraction": float(((p >= lo) & (p <= hi)).mean()),
+            "window_fraction": _window_share(p, self.window_kpa),
             "leak_l_min": float(self.leak_l_min[c].sum()),
             "seal_force_n": self.seal_force_n,
             "headgear_force_n": round(self.force_n, 3),
@@ -178,14 +178,15 @@ def window_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitPar
     if hi_n <= lo_n:
         return lo_n
     flaps = _flaps(rim, params.cpap_kpa)
-    low, high = params.window_kpa
-
-    def share(force: float) -> float:
-        p = _press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps).pressure_kpa
-        return float(((p >= low) & (p <= high)).mean())
-
     forces = np.linspace(lo_n, hi_n, steps + 1)
-    return float(forces[np.argmax([share(f) for f in forces])])
+    shares = [_window_share(_press_rim(rim, k, width_mm, f, params.cpap_kpa, flaps).pressure_kpa, params.window_kpa) for f in forces]
+    return float(forces[np.argmax(shares)])
+
+
+def _window_share(pressure_kpa: np.ndarray, window_kpa: tuple) -> float:
+    """The share of (K,) rim pressures (kPa) within the safe window (low, high) kPa."""
+    low, high = window_kpa
+    return float(((pressure_kpa >= low) & (pressure_kpa <= high)).mean())
 
 
 def _bisected(below: Callable[[float], bool], lo: float, hi: float, tol_n: float) -> tuple[float, float]:
@@ -313,7 +314,7 @@ def refined_preload(preload: np.ndarray, curve: np.ndarray, fit: CushionFit, smo
 
 def _around(points: np.ndarray, centre: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """(K, 2): where (K, 3) mm points lie around the unit `axis` through `centre`, as unit vectors across it."""
-    return trimesh.util.unitize((points - centre) @ in_plane(axis, np.eye(3)[np.argmin(np.abs(axis))]).T)
+    return trimesh.util.unitize((points - centre) @ plane_across(axis).T)
 
 
 def _bounded(preload: np.ndarray) -> np.ndarray:
