@@ -453,6 +453,22 @@ def test_the_skins_slope_under_the_rim_is_the_scans_not_the_registered_faces(as_
     assert rim.cos[rim.covered] == pytest.approx(np.full(rim.covered.sum(), 0.5), abs=0.06)  # 60 +- 4 degrees
 
 
+def test_the_rim_is_where_the_cushion_first_touches_the_scanned_skin_not_the_registered_face():
+    """Skin rising 0.5 mm a mm outwards under a flat flange (radius 30-36 mm, 8 mm up) touches its
+    outer edge first: the rim runs there (sealed area within 2 % of a 36 mm disc, clearance 6.5 mm)
+    though the registered face under it falls outwards (it would pick the inner edge, 30 mm)."""
+    grid = np.stack(np.meshgrid(np.arange(-60, 61, 1.0), np.arange(-60, 61, 1.0)), -1).reshape(-1, 2)
+    r = np.linalg.norm(grid, axis=1)
+    tri = Delaunay(grid).simplices
+    scan = trimesh.Trimesh(np.column_stack([grid, 0.5 * (r - 33.0)]), tri)
+    face = trimesh.Trimesh(np.column_stack([grid, -0.5 * (r - 33.0)]), tri)
+    ring = trimesh.creation.annulus(30.0, 36.0, 2.0).apply_translation((0, 0, 9.0))  # bottom at z = 8
+    rim = find_rim(ring, scan, face, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    assert rim.covered.all()
+    assert rim.sealed_area_mm2 == pytest.approx(np.pi * 36.0**2, rel=0.02)
+    assert np.median(rim.clearance) == pytest.approx(6.5, abs=0.1)
+
+
 def test_tissue_over_the_nasal_bones_is_stiffest():
     k = stiffness(np.array([6, 205, 152]))  # nasal bridge, cheek, chin
     assert k.region == ("nasal bridge", "cheek", "chin")

@@ -146,8 +146,10 @@ def rim_in(
     up: np.ndarray, sectors: int = SECTORS,
 ) -> RimContact:
     """The contact line of a cushion (its `RimZone`) over a `scan` surface or point cloud, mm, scan
-    frame. The rim is found against `face_mesh` (the registered template: the whole face, no holes),
-    its clearance is measured against the scan; where the scan's skin is missing or lies more than
+    frame. Each sector's rim point is the wall vertex that first touches the skin along the axis:
+    the scanned skin where the scan is a mesh (`_touch_heights`), `face_mesh` (the registered
+    template: the whole face, no holes) over its holes and under a point cloud. Its clearance is
+    measured against the scan; where the scan's skin is missing or lies more than
     FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
     of the face counts: the cushion would press on it); InputError if less than MIN_COVERED of the
     rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
@@ -158,7 +160,8 @@ def rim_in(
     near = _rim_band(vertices @ axis, sector, sectors)
     on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
     on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
-    level = np.round(np.nan_to_num(on_face, nan=np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
+    height = _touch_heights(vertices, near, on_face, scan, axis)
+    level = np.round(np.nan_to_num(height, nan=np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
     order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
     order = order[near[order]]
     first = order[np.unique(sector[order], return_index=True)[1]]  # least clearance in each sector
@@ -177,6 +180,19 @@ def rim_in(
     cos = np.where(np.isfinite(cos), cos, np.abs(face_cos[first]))
     clearance, cos = _nearest_skin(pts, clearance, cos, scan, axis)
     return RimContact(pts, skin, clearance, cos, seal_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
+
+
+def _touch_heights(vertices: np.ndarray, near: np.ndarray, on_face: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
+                   axis: np.ndarray) -> np.ndarray:
+    """(V,) mm: how far each of the `near` (V,) cushion `vertices` (V, 3) travels along the unit `axis`
+    to touch the skin: over a mesh scan, its height over the scanned skin unless that lies more
+    than FACE_MM behind the registered face (a ray through a hole; skin in front of the face is
+    pressed on), else (and over a point cloud) its height over the face, `on_face` (V,) mm."""
+    if not isinstance(scan, trimesh.Trimesh):
+        return on_face
+    on_scan = np.full(len(vertices), np.nan)
+    on_scan[near] = _height_over(vertices[near], scan, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)[0]
+    return np.where(on_scan - on_face <= FACE_MM, on_scan, on_face)
 
 
 def _sector(uv: np.ndarray, sectors: int) -> np.ndarray:
