@@ -203,6 +203,24 @@ def test_scan_behind_the_face_is_a_hole_and_scan_in_front_of_it_is_pressed_on():
     assert rim.covered[front].all() and rim.clearance[front] == pytest.approx(-3.0, abs=0.02)
 
 
+def test_a_rim_inside_the_scanned_skin_is_over_skin_however_deep_the_registered_face_reads_it():
+    """A rim pressed 2 mm into a scanned plane where the registered face stands 10 mm in front of
+    the scan over a patch (its overhang: the wing of the nose over the crease beside it): covered,
+    2 mm deep, not taken for a ray through a hole (12 mm behind the face)."""
+    from tests.test_cushion import grid_faces
+
+    n = 161
+    xy = np.stack(np.meshgrid(np.linspace(-40, 40, n), np.linspace(-40, 40, n)), -1).reshape(-1, 2)
+    scan = trimesh.Trimesh(np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n), process=False)
+    height = np.where(np.linalg.norm(xy - [RING_MM, 0.0], axis=1) < 8.0, 10.0, 0.0)
+    face = trimesh.Trimesh(np.column_stack([xy, height]), grid_faces(n), process=False)
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 1.5).apply_translation((0, 0, 0.75 - 2))  # all of it in the skin, bottom at z = -2
+    rim = find_rim(ring, scan, face, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    under = np.linalg.norm(rim.points[:, :2] - [RING_MM, 0.0], axis=1) < 4.0
+    assert under.any() and rim.covered.all()
+    assert rim.clearance == pytest.approx(np.full(len(rim.clearance), -2.0), abs=0.05)
+
+
 def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points():
     """A cloud of points 4 mm apart on the plane z = 0 (with its normals): rim points 0.2 mm above it,
     midway between points (2.8 mm from the nearest), are 0.2 mm off the skin; 9 mm above, 9 mm."""

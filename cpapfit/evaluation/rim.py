@@ -151,7 +151,8 @@ def rim_in(
     template: the whole face, no holes) over its holes and under a point cloud. Its clearance is
     measured against the scan; where the scan's skin is missing or lies more than
     FACE_MM behind the face (a ray through a hole), the point is not covered (scan standing in front
-    of the face counts: the cushion would press on it); InputError if less than MIN_COVERED of the
+    of the face counts: the cushion would press on it, and so does a point inside the scanned skin,
+    `_through_hole`); InputError if less than MIN_COVERED of the
     rim is. `axis`: the unit mask axis (out of the face); `up`: the head's up direction."""
     vertices = zone.wall
     plane = in_plane(axis, up)
@@ -169,7 +170,7 @@ def rim_in(
         raise InputError("the cushion does not run all the way round the mask axis over the face")
     pts = vertices[first]
     clearance, skin = _skin_below(pts, scan, axis)
-    clearance[clearance - on_face[first] > FACE_MM] = np.nan
+    clearance[_through_hole(clearance, on_face[first])] = np.nan
     covered = np.isfinite(clearance).mean()
     if covered < MIN_COVERED:
         raise InputError(f"only {100 * covered:.0f} % of the cushion's rim lies over scanned skin "
@@ -185,14 +186,23 @@ def rim_in(
 def _touch_heights(vertices: np.ndarray, near: np.ndarray, on_face: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
                    axis: np.ndarray) -> np.ndarray:
     """(V,) mm: how far each of the `near` (V,) cushion `vertices` (V, 3) travels along the unit `axis`
-    to touch the skin: over a mesh scan, its height over the scanned skin unless that lies more
-    than FACE_MM behind the registered face (a ray through a hole; skin in front of the face is
-    pressed on), else (and over a point cloud) its height over the face, `on_face` (V,) mm."""
+    to touch the skin: over a mesh scan, its height over the scanned skin unless the ray goes
+    through a hole (`_through_hole`; skin in front of the face is pressed on), else (and over a
+    point cloud) its height over the registered face, `on_face` (V,) mm."""
     if not isinstance(scan, trimesh.Trimesh):
         return on_face
     on_scan = np.full(len(vertices), np.nan)
     on_scan[near] = _height_over(vertices[near], scan, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)[0]
-    return np.where(on_scan - on_face <= FACE_MM, on_scan, on_face)
+    return np.where(np.isnan(on_scan) | _through_hole(on_scan, on_face), on_face, on_scan)
+
+
+def _through_hole(on_scan: np.ndarray, on_face: np.ndarray) -> np.ndarray:
+    """(K,) bool: points whose height over the scanned skin `on_scan` (K,) mm lies more than FACE_MM
+    past their height over the registered face `on_face` (K,) mm, a ray through a hole meeting what
+    lies behind it; never a point inside the scanned skin (height <= 0), however deep in an overhang
+    of the registered face it reads (the wing of the nose beside its crease)."""
+    with np.errstate(invalid="ignore"):
+        return (on_scan - on_face > FACE_MM) & (on_scan > 0)
 
 
 def _sector(uv: np.ndarray, sectors: int) -> np.ndarray:
