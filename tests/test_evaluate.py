@@ -221,6 +221,18 @@ def test_a_rim_inside_the_scanned_skin_is_over_skin_however_deep_the_registered_
     assert rim.clearance == pytest.approx(np.full(len(rim.clearance), -2.0), abs=0.05)
 
 
+def test_a_rim_past_the_edge_of_the_registered_face_over_scanned_skin_is_found_there():
+    """A registered face 50 mm square under a ring of radius 30-36 mm, the scanned plane under all
+    of it: the rim is found on the scan (every sector, clearance 3 mm), not refused for running
+    off the registered face."""
+    plane = trimesh.creation.box((200, 200, 2)).apply_translation((0, 0, -1))  # top face at z = 0
+    face = trimesh.creation.box((50, 50, 2)).apply_translation((0, 0, -1))
+    ring = trimesh.creation.annulus(RING_MM, RING_MM + 6, 10).apply_translation((0, 0, 5 + 3))  # bottom at z = 3
+    rim = find_rim(ring, plane, face, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
+    assert rim.covered.all()
+    assert rim.clearance == pytest.approx(np.full(256, 3.0), abs=1e-6)
+
+
 def test_a_rim_over_a_sparse_point_cloud_is_measured_to_its_skin_not_its_points():
     """A cloud of points 4 mm apart on the plane z = 0 (with its normals): rim points 0.2 mm above it,
     midway between points (2.8 mm from the nearest), are 0.2 mm off the skin; 9 mm above, 9 mm."""

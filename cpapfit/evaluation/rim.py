@@ -166,7 +166,7 @@ def rim_in(
     order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
     order = order[near[order]]
     first = order[np.unique(sector[order], return_index=True)[1]]  # least clearance in each sector
-    if len(first) < sectors or not np.isfinite(on_face[first]).all():
+    if len(first) < sectors or not np.isfinite(height[first]).all():
         raise InputError("the cushion does not run all the way round the mask axis over the face")
     pts = vertices[first]
     clearance, skin = _skin_below(pts, scan, axis)
