@@ -25,10 +25,11 @@ demo: $(STAMP)
 test: $(STAMP) $(CHROMIUM)
 	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
 
-# The report test opens report.html in headless Chromium: Debian's package, no browser download.
+# The report test opens report.html in headless Chromium (Debian's package, no browser download);
+# libusb is what pyrealsense2 reads a RealSense recording with.
 $(CHROMIUM):
 	apt-get update -q
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium libusb-1.0-0
 
 clean:
 	rm -rf $(VENV) cpapfit-demo
