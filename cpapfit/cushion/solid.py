@@ -120,13 +120,17 @@ def wall_thickness(grid: np.ndarray, outer: np.ndarray) -> np.ndarray:
     return walls
 
 
-def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8
-                  ) -> tuple[trimesh.Trimesh, tuple[float, float]]:
+def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8,
+                  simplify_mm: float = 0.0) -> tuple[trimesh.Trimesh, tuple[float, float]]:
     """(the printable cushion, (the membrane's thinnest wall mm, the least share of its set
     thickness it has anywhere)): the cushion's `wall` solid united (manifold3d) with its membrane,
     the membrane's NURBS sheet `thickened` to its thickness along the seal
     (`Cushion.membrane_thickness_at`) away from the face (`skin_normals`: (K, 3) along the seal
-    curve). Its root lies inside the flange, so the union joins them along the flange's inner edge."""
+    curve). Its root lies inside the flange, so the union joins them along the flange's inner edge.
+    `simplify_mm`: the union's features finer than this collapsed (manifold3d's `simplify`; the
+    slivers its boolean can leave where the flaps' roots meet the flange at a tight bend)."""
     target = cushion.membrane_thickness_at(n_u)
     flap, walls, _ = thickened(cushion.membrane_grid(n_u, n_v), target, closed_resample(skin_normals, n_u))
-    return to_trimesh(to_manifold(wall) + to_manifold(flap)), (float(walls.min()), float((walls / np.repeat(target, n_v)).min()))
+    joined = to_manifold(wall) + to_manifold(flap)
+    joined = joined.simplify(simplify_mm) if simplify_mm else joined
+    return to_trimesh(joined), (float(walls.min()), float((walls / np.repeat(target, n_v)).min()))
