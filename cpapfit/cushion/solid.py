@@ -127,8 +127,9 @@ def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndar
     the membrane's NURBS sheet `thickened` to its thickness along the seal
     (`Cushion.membrane_thickness_at`) away from the face (`skin_normals`: (K, 3) along the seal
     curve). Its root lies inside the flange, so the union joins them along the flange's inner edge.
-    `simplify_mm`: the union's features finer than this collapsed (manifold3d's `simplify`; the
-    slivers its boolean can leave where the flaps' roots meet the flange at a tight bend)."""
+    `simplify_mm`: the union's features finer than this collapsed (manifold3d's `simplify`, which
+    moves the surface by up to about twice it; the slivers its boolean can leave where the flaps'
+    roots meet the flange at a tight bend)."""
     target = cushion.membrane_thickness_at(n_u)
     flap, walls, _ = thickened(cushion.membrane_grid(n_u, n_v), target, closed_resample(skin_normals, n_u))
     joined = to_manifold(wall) + to_manifold(flap)
