@@ -5,7 +5,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-PRINT_MM = 0.05  # finer than a resin printer resolves
+PRINT_RESOLUTION_MM = 0.05  # finer than a resin printer resolves
 EDGE_CLEARANCE_MM = 1e-3  # a segment hitting a triangle nearer its edge than this passes through the edge (rounding), not the triangle
 
 
@@ -20,7 +20,7 @@ def to_trimesh(m: manifold3d.Manifold) -> trimesh.Trimesh:
     return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts), process=False)
 
 
-def self_intersecting_edges(mesh: trimesh.Trimesh, tol_mm: float = PRINT_MM) -> int:
+def self_intersecting_edges(mesh: trimesh.Trimesh, tol_mm: float = PRINT_RESOLUTION_MM) -> int:
     """How many edges pierce the inside of a triangle they are not part of, from one side of its
     plane to the other (0 for a clean surface; contacts along edges, at corners or in a plane do
     not count, nor folds within `tol_mm` (by default finer than a resin printer resolves), nor hits within

@@ -192,20 +192,20 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
 
 def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a_print_resolution(designed):
     """A designed cushion's membrane joined to its wall with the union's features finer than
-    PRINT_MM (0.05 mm) collapsed (what `with_flaps` falls back to where the union crosses itself
+    PRINT_RESOLUTION_MM (0.05 mm) collapsed (what `with_flaps` falls back to where the union crosses itself
     only by such slivers): watertight, crossing itself nowhere, each of its vertices within twice
-    PRINT_MM of the plain union's surface and the plain union's within twice PRINT_MM of it (the
+    PRINT_RESOLUTION_MM of the plain union's surface and the plain union's within twice PRINT_RESOLUTION_MM of it (the
     collapse moves the surface by up to 0.085 mm here), its volume within 0.1 %."""
     from cpapfit.cushion.solid import cushion_solid, with_membrane
-    from cpapfit.solids import PRINT_MM, self_intersecting_edges
+    from cpapfit.solids import PRINT_RESOLUTION_MM, self_intersecting_edges
 
     _, d = designed
     wall = cushion_solid(d.cushion, d.contact.normals)[0]
     plain = with_membrane(d.cushion, wall, d.contact.normals)[0]
-    simple = with_membrane(d.cushion, wall, d.contact.normals, simplify_mm=PRINT_MM)[0]
+    simple = with_membrane(d.cushion, wall, d.contact.normals, simplify_mm=PRINT_RESOLUTION_MM)[0]
     assert simple.is_watertight and self_intersecting_edges(simple) == 0
-    assert np.abs(trimesh.proximity.signed_distance(plain, simple.vertices)).max() <= 2 * PRINT_MM
-    assert np.abs(trimesh.proximity.signed_distance(simple, plain.vertices)).max() <= 2 * PRINT_MM
+    assert np.abs(trimesh.proximity.signed_distance(plain, simple.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
+    assert np.abs(trimesh.proximity.signed_distance(simple, plain.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
     assert simple.volume == pytest.approx(plain.volume, rel=1e-3)
 
 

@@ -161,13 +161,13 @@ def rim_in(
     near = _rim_band(vertices @ axis, sector, sectors)
     on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
     on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
-    height = _touch_heights(vertices, near, on_face, scan, axis)
-    level = np.round(np.nan_to_num(height, nan=np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
+    height = _touch_heights(vertices, near, sector, on_face, scan, axis)
+    level = np.round(np.where(np.isfinite(height), height, np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
     order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
     order = order[near[order]]
-    first = order[np.unique(sector[order], return_index=True)[1]]  # least clearance in each sector
+    first = order[np.unique(sector[order], return_index=True)[1]]  # first to touch in each sector
     if len(first) < sectors or not np.isfinite(height[first]).all():
-        raise InputError("the cushion does not run all the way round the mask axis over the face")
+        raise InputError("the cushion does not run all the way round the mask axis over the face or the scan")
     pts = vertices[first]
     clearance, skin = _skin_below(pts, scan, axis)
     clearance[_through_hole(clearance, on_face[first])] = np.nan
@@ -183,26 +183,33 @@ def rim_in(
     return RimContact(pts, skin, clearance, cos, seal_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
-def _touch_heights(vertices: np.ndarray, near: np.ndarray, on_face: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
-                   axis: np.ndarray) -> np.ndarray:
-    """(V,) mm: how far each of the `near` (V,) cushion `vertices` (V, 3) travels along the unit `axis`
-    to touch the skin: over a mesh scan, its height over the scanned skin unless the ray goes
-    through a hole (`_through_hole`; skin in front of the face is pressed on), else (and over a
-    point cloud) its height over the registered face, `on_face` (V,) mm."""
+def _touch_heights(vertices: np.ndarray, near: np.ndarray, sector: np.ndarray, on_face: np.ndarray,
+                   scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray) -> np.ndarray:
+    """(V,) mm: the height along the unit `axis` of each of the `near` (V,) cushion `vertices` (V, 3)
+    over the skin (negative: inside it; NaN off `near`), which orders each `sector`'s (V,) vertices
+    by first touch. Over a mesh scan, its height over the scanned skin (one ray: the rim point's
+    clearance is then read as the median of a few, `skin_under`; skin past the registered face's
+    edge, within REACH_MM, is skin); a vertex whose ray meets no skin or goes through a hole
+    (`_through_hole`) is never its sector's first while another over skin is, and where none is (a
+    sector over a hole), and over a point cloud, the height over the registered face, `on_face`
+    (V,) mm, orders them."""
     if not isinstance(scan, trimesh.Trimesh):
         return on_face
     on_scan = np.full(len(vertices), np.nan)
     on_scan[near] = _height_over(vertices[near], scan, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)[0]
-    return np.where(np.isnan(on_scan) | _through_hole(on_scan, on_face), on_face, on_scan)
+    skin = np.isfinite(on_scan) & ~_through_hole(on_scan, on_face)
+    skinned = np.zeros(int(sector.max()) + 1, dtype=bool)
+    skinned[sector[skin]] = True
+    return np.where(skin, on_scan, np.where(skinned[sector], np.inf, on_face))
 
 
 def _through_hole(on_scan: np.ndarray, on_face: np.ndarray) -> np.ndarray:
     """(K,) bool: points whose height over the scanned skin `on_scan` (K,) mm lies more than FACE_MM
     past their height over the registered face `on_face` (K,) mm, a ray through a hole meeting what
-    lies behind it; never a point inside the scanned skin (height <= 0), however deep in an overhang
-    of the registered face it reads (the wing of the nose beside its crease)."""
-    with np.errstate(invalid="ignore"):
-        return (on_scan - on_face > FACE_MM) & (on_scan > 0)
+    lies behind it; a point the registered face reads inside it counts as on its skin (height 0),
+    however deep in an overhang of the face it reads (the wing of the nose beside its crease), so a
+    point inside the scanned skin is never over a hole. NaN (no skin found) is not a hole here."""
+    return np.nan_to_num(on_scan - np.maximum(on_face, 0.0), nan=-np.inf) > FACE_MM
 
 
 def _sector(uv: np.ndarray, sectors: int) -> np.ndarray:
