@@ -1,8 +1,10 @@
 # Two commands do everything on a fresh machine:
 #   make demo   installs into .venv and runs `cpapfit demo`
-#   make test   installs into .venv (and Debian's chromium, for the report's browser test) and runs the test suite
+#   make test   installs into .venv (and Debian's chromium, for the report's browser test, and libusb, for
+#               reading a RealSense recording) and runs the test suite
 PYTHON ?= python3
 CHROMIUM := /usr/bin/chromium
+LIBUSB := /usr/share/doc/libusb-1.0-0/copyright
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
@@ -22,14 +24,18 @@ demo: $(STAMP)
 
 # Two worker processes (pytest-xdist): most tests use one core, and CI has two; tests sharing a costly
 # fixture run in one of them (`tests/conftest.py`, SHARED_WORK); the 15 slowest tests listed.
-test: $(STAMP) $(CHROMIUM)
+test: $(STAMP) $(CHROMIUM) $(LIBUSB)
 	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
 
-# The report test opens report.html in headless Chromium (Debian's package, no browser download);
-# libusb is what pyrealsense2 reads a RealSense recording with.
+# The report test opens report.html in headless Chromium: Debian's package, no browser download.
 $(CHROMIUM):
 	apt-get update -q
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium libusb-1.0-0
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium
+
+# pyrealsense2 reads a RealSense recording with libusb: Debian's package.
+$(LIBUSB):
+	apt-get update -q
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -q libusb-1.0-0
 
 clean:
 	rm -rf $(VENV) cpapfit-demo

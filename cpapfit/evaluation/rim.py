@@ -161,7 +161,7 @@ def rim_in(
     near = _rim_band(vertices @ axis, sector, sectors)
     on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
     on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
-    height = _touch_heights(vertices, near, sector, on_face, scan, axis)
+    height = _touch_heights(vertices, near, on_face, scan, axis)
     level = np.round(np.where(np.isfinite(height), height, np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
     order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
     order = order[near[order]]
@@ -183,24 +183,19 @@ def rim_in(
     return RimContact(pts, skin, clearance, cos, seal_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
-def _touch_heights(vertices: np.ndarray, near: np.ndarray, sector: np.ndarray, on_face: np.ndarray,
-                   scan: trimesh.Trimesh | trimesh.PointCloud, axis: np.ndarray) -> np.ndarray:
+def _touch_heights(vertices: np.ndarray, near: np.ndarray, on_face: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
+                   axis: np.ndarray) -> np.ndarray:
     """(V,) mm: the height along the unit `axis` of each of the `near` (V,) cushion `vertices` (V, 3)
-    over the skin (negative: inside it; NaN off `near`), which orders each `sector`'s (V,) vertices
-    by first touch. Over a mesh scan, its height over the scanned skin (one ray: the rim point's
-    clearance is then read as the median of a few, `skin_under`; skin past the registered face's
-    edge, within REACH_MM, is skin); a vertex whose ray meets no skin or goes through a hole
-    (`_through_hole`) is never its sector's first while another over skin is, and where none is (a
-    sector over a hole), and over a point cloud, the height over the registered face, `on_face`
-    (V,) mm, orders them."""
+    over the skin (negative: inside it; NaN off `near`), which orders them by first touch: over a
+    mesh scan, its height over the scanned skin (one ray: the rim point's clearance is then read as
+    the median of a few, `skin_under`; skin past the registered face's edge, within REACH_MM, is
+    skin), unless that ray meets no skin or goes through a hole (`_through_hole`); else, and over a
+    point cloud, its height over the registered face, `on_face` (V,) mm."""
     if not isinstance(scan, trimesh.Trimesh):
         return on_face
     on_scan = np.full(len(vertices), np.nan)
     on_scan[near] = _height_over(vertices[near], scan, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)[0]
-    skin = np.isfinite(on_scan) & ~_through_hole(on_scan, on_face)
-    skinned = np.zeros(int(sector.max()) + 1, dtype=bool)
-    skinned[sector[skin]] = True
-    return np.where(skin, on_scan, np.where(skinned[sector], np.inf, on_face))
+    return np.where(np.isfinite(on_scan) & ~_through_hole(on_scan, on_face), on_scan, on_face)
 
 
 def _through_hole(on_scan: np.ndarray, on_face: np.ndarray) -> np.ndarray:
