@@ -179,7 +179,8 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
     set_mm = np.where(np.arange(AROUND) < AROUND // 2, 0.3, 0.5)
     cushion = Cushion("nasal", net, np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), CushionParams(), net, set_mm)
     wall = trimesh.creation.box((4.0, 4.0, 4.0), trimesh.transformations.translation_matrix([0.0, 0.0, 20.0]))
-    solid, (thinnest, share) = with_membrane(cushion, wall, np.tile([0.0, 0.0, 1.0], (AROUND, 1)))
+    solid, (thinnest, share), crossings = with_membrane(cushion, wall, np.tile([0.0, 0.0, 1.0], (AROUND, 1)))
+    assert crossings == 0
     assert thinnest == pytest.approx(0.3, abs=0.01) and share >= 0.99
     thick = vertex_thickness_mm(solid, face_thickness_mm(solid))
     flap = (solid.vertices[:, 2] < 1.0) & np.isfinite(thick)
@@ -191,18 +192,20 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
 
 
 def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a_print_resolution(designed):
-    """A designed cushion's membrane joined to its wall with the union's features finer than
-    PRINT_RESOLUTION_MM (0.05 mm) collapsed (what `with_flaps` falls back to where the union crosses itself
-    only by such slivers): watertight, crossing itself nowhere, each of its vertices within twice
-    PRINT_RESOLUTION_MM of the plain union's surface and the plain union's within twice PRINT_RESOLUTION_MM of it (the
-    collapse moves the surface by up to 0.085 mm here), its volume within 0.1 %."""
+    """A designed cushion's membrane joined to its wall crosses itself nowhere; the same union with
+    its features finer than PRINT_RESOLUTION_MM (0.05 mm) collapsed (what `with_membrane` returns
+    where the union crosses itself only by such slivers): watertight, crossing itself nowhere, each
+    of its vertices within twice PRINT_RESOLUTION_MM of the plain union's surface and the plain
+    union's within twice PRINT_RESOLUTION_MM of it (the collapse moves the surface by up to
+    0.085 mm here), its volume within 0.1 %."""
     from cpapfit.cushion.solid import cushion_solid, with_membrane
-    from cpapfit.solids import PRINT_RESOLUTION_MM, self_intersecting_edges
+    from cpapfit.solids import PRINT_RESOLUTION_MM, self_intersecting_edges, to_manifold, to_trimesh
 
     _, d = designed
     wall = cushion_solid(d.cushion, d.contact.normals)[0]
-    plain = with_membrane(d.cushion, wall, d.contact.normals)[0]
-    simple = with_membrane(d.cushion, wall, d.contact.normals, simplify_mm=PRINT_RESOLUTION_MM)[0]
+    plain, _, crossings = with_membrane(d.cushion, wall, d.contact.normals)
+    assert crossings == 0 == self_intersecting_edges(plain)
+    simple = to_trimesh(to_manifold(plain).simplify(PRINT_RESOLUTION_MM))
     assert simple.is_watertight and self_intersecting_edges(simple) == 0
     assert np.abs(trimesh.proximity.signed_distance(plain, simple.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
     assert np.abs(trimesh.proximity.signed_distance(simple, plain.vertices)).max() <= 2 * PRINT_RESOLUTION_MM

@@ -36,7 +36,6 @@ from .solid import with_membrane
 from ..evaluation.fit import KPA_PER_CMH2O, CushionFit, Face, FitParams, peak_force, window_force
 from ..evaluation.membrane import reach_mm, width_for
 from ..evaluation.rim import SECTORS
-from ..solids import PRINT_RESOLUTION_MM, self_intersecting_edges
 from ..evaluation.states import CPAP_RANGE_CMH2O, FaceState, StateFit, fit_states, sleep_states
 
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
@@ -150,8 +149,8 @@ def with_flaps(
     """(the cushion with its membrane, its printable solid, (the membrane's thinnest wall mm, the
     least share of its set thickness, `with_membrane`)): the design (`design_cushion` of these arguments) given flaps of
     `widths` (AROUND,) mm, its `wall` solid joined to them; narrowed where the membrane's sheet would
-    twist (`twisted_columns`), and everywhere while its solid would cross itself (where it does
-    only by slivers of the union, finer than PRINT_RESOLUTION_MM, those collapsed, `with_membrane`), by SHRINK at most
+    twist (`twisted_columns`), and everywhere while its solid would cross itself (beyond the
+    slivers `with_membrane` collapses), by SHRINK at most
     SHRINKS times each. `need` {CPAP kPa: (AROUND,) mm}: the reach each column's flap must have at
     each pressure; the flaps are then sized for this face: the neighbours of the columns each
     narrowing takes in step down to them (`tapered`), and where a flap is narrower than reaches its need, its sheet is
@@ -170,11 +169,7 @@ def with_flaps(
         if need is not None:
             widths = np.minimum(widths, tapered(np.where(twisted, widths, np.inf)))
     for _ in range(SHRINKS + 1):
-        solid, thinnest = with_membrane(sized, wall, contact.normals)
-        crossings = self_intersecting_edges(solid)
-        if crossings:  # the union's slivers, finer than a print resolves, collapsed
-            solid, thinnest = with_membrane(sized, wall, contact.normals, simplify_mm=PRINT_RESOLUTION_MM)
-            crossings = self_intersecting_edges(solid)
+        solid, thinnest, crossings = with_membrane(sized, wall, contact.normals)
         if crossings == 0:
             break
         widths = SHRINK * widths

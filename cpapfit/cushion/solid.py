@@ -6,7 +6,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import cKDTree
 
 from .contact import closed_resample
-from ..solids import self_intersecting_edges, to_manifold, to_trimesh
+from ..solids import PRINT_RESOLUTION_MM, self_intersecting_edges, to_manifold, to_trimesh
 from .nurbs import Cushion
 
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
@@ -120,18 +120,23 @@ def wall_thickness(grid: np.ndarray, outer: np.ndarray) -> np.ndarray:
     return walls
 
 
-def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128, n_v: int = 8,
-                  simplify_mm: float = 0.0) -> tuple[trimesh.Trimesh, tuple[float, float]]:
+def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128,
+                  n_v: int = 8) -> tuple[trimesh.Trimesh, tuple[float, float], int]:
     """(the printable cushion, (the membrane's thinnest wall mm, the least share of its set
-    thickness it has anywhere)): the cushion's `wall` solid united (manifold3d) with its membrane,
-    the membrane's NURBS sheet `thickened` to its thickness along the seal
-    (`Cushion.membrane_thickness_at`) away from the face (`skin_normals`: (K, 3) along the seal
-    curve). Its root lies inside the flange, so the union joins them along the flange's inner edge.
-    `simplify_mm`: the union's features finer than this collapsed (manifold3d's `simplify`, which
-    moves the surface by up to about twice it; the slivers its boolean can leave where the flaps'
-    roots meet the flange at a tight bend)."""
+    thickness it has anywhere), how many of its edges cross it (`self_intersecting_edges`)): the
+    cushion's `wall` solid united (manifold3d) with its membrane, the membrane's NURBS sheet
+    `thickened` to its thickness along the seal (`Cushion.membrane_thickness_at`) away from the face
+    (`skin_normals`: (K, 3) along the seal curve). Its root lies inside the flange, so the union
+    joins them along the flange's inner edge. Where the union crosses itself, its features finer
+    than PRINT_RESOLUTION_MM are collapsed (manifold3d's `simplify`, which moves the surface by up
+    to about twice that): the slivers its boolean can leave where the flaps' roots meet the flange
+    at a tight bend."""
     target = cushion.membrane_thickness_at(n_u)
     flap, walls, _ = thickened(cushion.membrane_grid(n_u, n_v), target, closed_resample(skin_normals, n_u))
     joined = to_manifold(wall) + to_manifold(flap)
-    joined = joined.simplify(simplify_mm) if simplify_mm else joined
-    return to_trimesh(joined), (float(walls.min()), float((walls / np.repeat(target, n_v)).min()))
+    solid = to_trimesh(joined)
+    crossings = self_intersecting_edges(solid)
+    if crossings:
+        solid = to_trimesh(joined.simplify(PRINT_RESOLUTION_MM))
+        crossings = self_intersecting_edges(solid)
+    return solid, (float(walls.min()), float((walls / np.repeat(target, n_v)).min())), crossings
