@@ -197,7 +197,7 @@ def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a
     where the union crosses itself only by such slivers): watertight, crossing itself nowhere, each
     of its vertices within twice PRINT_RESOLUTION_MM of the plain union's surface and the plain
     union's within twice PRINT_RESOLUTION_MM of it (the collapse moves the surface by up to
-    0.085 mm here), its volume within 0.1 %."""
+    0.085 mm here), its volume within 0.2 %."""
     from cpapfit.cushion.solid import cushion_solid, with_membrane
     from cpapfit.solids import PRINT_RESOLUTION_MM, self_intersecting_edges, to_manifold, to_trimesh
 
@@ -209,7 +209,7 @@ def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a
     assert simple.is_watertight and self_intersecting_edges(simple) == 0
     assert np.abs(trimesh.proximity.signed_distance(plain, simple.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
     assert np.abs(trimesh.proximity.signed_distance(simple, plain.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
-    assert simple.volume == pytest.approx(plain.volume, rel=1e-3)
+    assert simple.volume == pytest.approx(plain.volume, rel=2e-3)
 
 
 @pytest.mark.parametrize("k0", [12, 13, 127])

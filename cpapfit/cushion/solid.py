@@ -10,13 +10,14 @@ from ..solids import PRINT_RESOLUTION_MM, self_intersecting_edges, to_manifold, 
 from .nurbs import Cushion
 
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
+OFFSET_PASSES = 5  # offsets grown where the wall is thinner than set, at most this many times
 
 
 def thicken(grid: np.ndarray, thickness_mm: np.ndarray, face_normals_hint: np.ndarray,
             smoothing: float = NORMAL_SMOOTHING[0]) -> trimesh.Trimesh:
-    """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` (n_u,)
-    along u to the side away from the face (`face_normals_hint`: (n_u, 3) skin normals along the
-    v=0 edge)."""
+    """A closed solid from an (n_u, n_v, 3) sheet, periodic in u, offset by `thickness_mm` ((n_u,)
+    along u, or (n_u, n_v) at each grid point) to the side away from the face (`face_normals_hint`:
+    (n_u, 3) skin normals along the v=0 edge)."""
     n_u, n_v, _ = grid.shape
     sheet = trimesh.Trimesh(grid.reshape(-1, 3), sheet_faces(n_u, n_v), process=False)
     normals = np.array(sheet.vertex_normals).reshape(n_u, n_v, 3)
@@ -24,7 +25,7 @@ def thicken(grid: np.ndarray, thickness_mm: np.ndarray, face_normals_hint: np.nd
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)  # smoothed: the offset does not fold in tight bends
     if np.einsum("ij,ij->i", normals[:, 0], face_normals_hint).mean() < 0:
         normals = -normals
-    outer = grid + thickness_mm[:, None, None] * normals
+    outer = grid + np.broadcast_to(np.reshape(thickness_mm, (n_u, -1)), (n_u, n_v))[:, :, None] * normals
     vertices = np.concatenate([grid.reshape(-1, 3), outer.reshape(-1, 3)])
     n = n_u * n_v
     sheet, rim, ring = sheet_faces(n_u, n_v), _cap(n_u, n_v, 0, n), _cap(n_u, n_v, n_v - 1, n)
@@ -80,23 +81,21 @@ def cushion_solid(cushion: Cushion, skin_normals: np.ndarray, n_u: int = 128, n_
 def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[trimesh.Trimesh, np.ndarray, int]:
     """(solid, (n_u * n_v,) wall mm at each grid point, self-intersecting edges) of an (n_u, n_v, 3)
     sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
-    along its v=0 edge). Where the sheet bends, an offset thins it on the inside of the bend, so the
-    offset grows (at most twice) until the thinnest wall against its target reaches it: a sheet of
-    one thickness as one, one whose thickness varies column by column (u), so that a thinner
-    column keeps its thickness; where the offset folds into itself, the offset directions are
-    smoothed more (NORMAL_SMOOTHING)."""
+    along its v=0 edge). An offset along the smoothed normals thins the wall where the sheet bends,
+    so each grid point's offset grows until its wall reaches its target (at most OFFSET_PASSES
+    times, each at most fourfold): the solid is as thick as set everywhere, not
+    thicker where its neighbours bend; where the offset folds into itself, the offset directions
+    are smoothed more (NORMAL_SMOOTHING)."""
     n_u, n_v, _ = grid.shape
-    wanted = np.repeat(target, n_v)
+    wanted = np.repeat(target, n_v).reshape(n_u, n_v)
     for smoothing in NORMAL_SMOOTHING:
-        offset = target
-        for _ in range(3):
+        offset = wanted
+        for _ in range(OFFSET_PASSES):
             solid = thicken(grid, offset, hint, smoothing)
             walls = wall_thickness(grid, solid.vertices[n_u * n_v:])
-            share = (walls / wanted).reshape(n_u, n_v).min(axis=1)  # (n_u,) each column's least share of its target
+            share = walls.reshape(n_u, n_v) / wanted
             if share.min() >= 1.0:
                 break
-            if np.ptp(target) == 0:
-                share = np.full(n_u, share.min())
             offset = offset * np.where(share < 1.0, 1.02 / np.maximum(share, 0.25), 1.0)
         folds = self_intersecting_edges(solid)
         if folds == 0:
