@@ -38,9 +38,8 @@ def test_solid_is_watertight_and_manifold_with_walls_of_the_set_thickness(design
 
 def test_the_wall_is_as_thick_as_set_everywhere_not_thicker_where_one_bend_thins_it(designed):
     """The designed cushion's surface thickened to its 2 mm wall: measured at each of its 128 x 24
-    grid points (to the sheet's nearest point), at least the set thickness and within 3 % over it
-    at 95 % of them, at most 20 % over anywhere: the offset grows only where a bend thins the wall
-    (grown as one, the whole wall would stand 10-50 % over where one bend thins it)."""
+    grid points (`wall_thickness`), at least the set thickness and within 3 % over it at 95 % of
+    them, at most 20 % over anywhere: the offset grows only where a bend thins the wall."""
     from cpapfit.cushion.contact import closed_resample
     from cpapfit.cushion.solid import thickened
 

@@ -191,22 +191,25 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
     assert max(edges[0], edges[1]) < 0.4 < min(edges[2], edges[3])  # each column as set, not its neighbour's
 
 
-def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a_print_resolution(designed):
-    """A designed cushion's membrane joined to its wall crosses itself nowhere; the same union with
-    its features finer than PRINT_RESOLUTION_MM (0.05 mm) collapsed (what `with_membrane` returns
-    where the union crosses itself only by such slivers): watertight, crossing itself nowhere, each
-    of its vertices within twice PRINT_RESOLUTION_MM of the plain union's surface and the plain
-    union's within twice PRINT_RESOLUTION_MM of it (the collapse moves the surface by up to
-    0.085 mm here), its volume within 0.2 %."""
+def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a_print_resolution(designed, monkeypatch):
+    """A designed cushion's membrane joined to its wall, the union taken for one that crosses
+    itself (its crossing count read as 1), comes back with its features finer than
+    PRINT_RESOLUTION_MM (0.05 mm) collapsed: watertight, crossing itself nowhere (the count
+    returned is the collapsed solid's, 0), each of its vertices within twice PRINT_RESOLUTION_MM of
+    the plain union's surface and the plain union's within twice PRINT_RESOLUTION_MM of it (the
+    collapse moves the surface by up to 0.085 mm here), its volume within 0.2 %."""
+    import cpapfit.cushion.solid as solid_module
     from cpapfit.cushion.solid import cushion_solid, with_membrane
-    from cpapfit.solids import PRINT_RESOLUTION_MM, self_intersecting_edges, to_manifold, to_trimesh
+    from cpapfit.solids import PRINT_RESOLUTION_MM, self_intersecting_edges
 
     _, d = designed
     wall = cushion_solid(d.cushion, d.contact.normals)[0]
     plain, _, crossings = with_membrane(d.cushion, wall, d.contact.normals)
     assert crossings == 0 == self_intersecting_edges(plain)
-    simple = to_trimesh(to_manifold(plain).simplify(PRINT_RESOLUTION_MM))
-    assert simple.is_watertight and self_intersecting_edges(simple) == 0
+    union = len(plain.vertices)  # the plain union, made again, is taken for one crossing itself at an edge
+    monkeypatch.setattr(solid_module, "self_intersecting_edges", lambda mesh: 1 if len(mesh.vertices) == union else self_intersecting_edges(mesh))
+    simple, _, crossings = with_membrane(d.cushion, wall, d.contact.normals)
+    assert crossings == 0 and simple.is_watertight and self_intersecting_edges(simple) == 0
     assert np.abs(trimesh.proximity.signed_distance(plain, simple.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
     assert np.abs(trimesh.proximity.signed_distance(simple, plain.vertices)).max() <= 2 * PRINT_RESOLUTION_MM
     assert simple.volume == pytest.approx(plain.volume, rel=2e-3)

@@ -168,9 +168,9 @@ def with_flaps(
         widths = np.where(twisted, SHRINK * widths, widths)
         if need is not None:
             widths = np.minimum(widths, tapered(np.where(twisted, widths, np.inf)))
-    for _ in range(SHRINKS + 1):
+    for attempt in range(SHRINKS + 1):
         solid, thinnest, crossings = with_membrane(sized, wall, contact.normals)
-        if crossings == 0:
+        if crossings == 0 or attempt == SHRINKS:  # the cushion returned is the one its solid was made from
             break
         widths = SHRINK * widths
         sized = sized_for(widths)

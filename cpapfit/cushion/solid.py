@@ -10,7 +10,8 @@ from ..solids import PRINT_RESOLUTION_MM, self_intersecting_edges, to_manifold, 
 from .nurbs import Cushion
 
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
-OFFSET_PASSES = 5  # offsets grown where the wall is thinner than set, at most this many times
+OFFSET_PASSES = 5  # solids offset at most, each growing the offsets where the wall is thinner than set
+MAX_OFFSET = 4.0  # no offset grows past this many times its set thickness
 
 
 def thicken(grid: np.ndarray, thickness_mm: np.ndarray, face_normals_hint: np.ndarray,
@@ -82,10 +83,10 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
     """(solid, (n_u * n_v,) wall mm at each grid point, self-intersecting edges) of an (n_u, n_v, 3)
     sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
     along its v=0 edge). An offset along the smoothed normals thins the wall where the sheet bends,
-    so each grid point's offset grows until its wall reaches its target (at most OFFSET_PASSES
-    times, each at most fourfold): the solid is as thick as set everywhere, not
-    thicker where its neighbours bend; where the offset folds into itself, the offset directions
-    are smoothed more (NORMAL_SMOOTHING)."""
+    so each grid point's offset grows, by 1.02 over its wall's share of its target, until its wall
+    reaches the target (OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
+    the solid is as thick as set everywhere, not thicker where its neighbours bend; where the
+    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
     n_u, n_v, _ = grid.shape
     wanted = np.repeat(target, n_v).reshape(n_u, n_v)
     for smoothing in NORMAL_SMOOTHING:
@@ -96,7 +97,7 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
             share = walls.reshape(n_u, n_v) / wanted
             if share.min() >= 1.0:
                 break
-            offset = offset * np.where(share < 1.0, 1.02 / np.maximum(share, 0.25), 1.0)
+            offset = np.minimum(offset * np.where(share < 1.0, 1.02 / np.maximum(share, 0.25), 1.0), MAX_OFFSET * wanted)
         folds = self_intersecting_edges(solid)
         if folds == 0:
             break
@@ -122,7 +123,8 @@ def wall_thickness(grid: np.ndarray, outer: np.ndarray) -> np.ndarray:
 def with_membrane(cushion: Cushion, wall: trimesh.Trimesh, skin_normals: np.ndarray, n_u: int = 128,
                   n_v: int = 8) -> tuple[trimesh.Trimesh, tuple[float, float], int]:
     """(the printable cushion, (the membrane's thinnest wall mm, the least share of its set
-    thickness it has anywhere), how many of its edges cross it (`self_intersecting_edges`)): the
+    thickness it has anywhere, both measured on the thickened membrane before the union), how many
+    of its edges cross it (`self_intersecting_edges`)): the
     cushion's `wall` solid united (manifold3d) with its membrane, the membrane's NURBS sheet
     `thickened` to its thickness along the seal (`Cushion.membrane_thickness_at`) away from the face
     (`skin_normals`: (K, 3) along the seal curve). Its root lies inside the flange, so the union
