@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from cpapfit.outputs import design_files, input_sha256, run_date
-from cpapfit.report.advice import Notice, gate_notices, landmark_notices, scan_notices
+from cpapfit.report.advice import Notice, at_seal_force, fit_notices, gate_notices, landmark_notices, scan_notices
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files
 from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
 from cpapfit.report.pictures import OPEN_RGB, rim_image
@@ -113,6 +113,25 @@ def test_holes_under_the_seal_and_low_confidence_are_warned(designed1):
     assert landmark_notices(lm) == []
     doubtful = type(lm)(lm.points, lm.template_index, np.where(np.arange(len(lm.points)) % 3 == 0, 0.1, 1.0), lm.path)
     assert "disagree" in landmark_notices(doubtful)[0].text
+
+
+def test_a_rim_pressing_too_hard_is_advised_by_whether_a_lower_force_can_ease_it(designed1):
+    """A custom rim pressing 5 kPa (over the 4.3 kPa window top) along 10 of its points: the
+    notice says where and, strapped above the least force that seals it, to lower the force; at
+    that force (within 1 %), that its shape presses there instead."""
+    from cpapfit.report.rim import RimFit
+
+    _, d = designed1
+    curve = d.contact.curve
+    pressure = np.where(np.arange(len(curve)) < 10, 5.0, 2.0)
+    rims = {"custom": RimFit(curve, np.zeros(len(curve)), pressure, np.zeros(len(curve), dtype=bool))}
+    for force, at_least in ((3.0, False), (2.02, True)):
+        fit = {"custom": {"headgear_force_n": force, "seal_force_n": 2.0}}
+        assert at_seal_force(fit) is at_least
+        (notice,) = fit_notices(rims, (1.2, 4.3), d.alignment.similarity, "nasal", at_seal_force(fit))
+        assert "presses above 4.3 kPa" in notice.text and "nasal bridge" in notice.text
+        assert ("least that seals" in notice.text) is at_least and ("lower the headgear force" in notice.text) is not at_least
+    assert at_seal_force({"custom": {"headgear_force_n": 2.0, "seal_force_n": None}}) is False
 
 
 def test_the_report_advises_a_rescan_exactly_when_fit_json_does(designed1, report):

@@ -49,15 +49,27 @@ def scan_notices(curve: np.ndarray, on_scan: np.ndarray, similarity: Similarity,
                             "see the contact picture.")]
 
 
-def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, mask: str) -> list[Notice]:
-    """The custom cushion pressing above the window's top, or open (leaking), with where."""
+def at_seal_force(fit: dict) -> bool:
+    """True when fit.json's custom cushion is strapped at the least force that seals it (within 1 %)."""
+    custom = fit.get("custom", {})
+    seal = custom.get("seal_force_n")
+    return seal is not None and custom.get("headgear_force_n", np.inf) <= 1.01 * seal
+
+
+def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, mask: str, at_seal_force: bool = False) -> list[Notice]:
+    """The custom cushion pressing above the window's top, or open (leaking), with where;
+    `at_seal_force`: its headgear force is already the least that seals it, so that a lower force
+    cannot ease the pressure."""
     if window_kpa is None or not has_pressure(rims):
         return []
     rim = rims["custom"]
     angle = around_seal(rim.points, similarity)
+    ease = ("its headgear force is already the least that seals it, so its shape presses there (a flange sunk into a "
+            "crease or under an overhang): look at the pressure picture before making it" if at_seal_force
+            else "lower the headgear force or the interference")
     out = []
     for flag, what, advice in (
-        (rim.pressure_kpa > window_kpa[1], f"presses above {window_kpa[1]:.1f} kPa", "lower the headgear force or the interference"),
+        (rim.pressure_kpa > window_kpa[1], f"presses above {window_kpa[1]:.1f} kPa", ease),
         (np.asarray(rim.open, dtype=bool), "is open (leaks)", "raise the headgear force or rescan"),
     ):
         if flag.any():

@@ -20,7 +20,7 @@ from ..scan import Scan
 from ..template import load_template
 from ..work import at_once
 from . import pictures as pic
-from .advice import fit_notices, gate_notices, landmark_notices, scan_notices
+from .advice import at_seal_force, fit_notices, gate_notices, landmark_notices, scan_notices
 from .figure import ColourScale, zoned_cmap
 from .frame import Face, seal_view, shoot, whole_face_view
 from .page import Page, Picture, lookup, report_html
@@ -182,7 +182,7 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     fig = viewer_figure(shown, cushion,
                         {n: (r.points, values[n]) for n, r in rims.items()}, scale, sim, d.cushion.axis)
     notices = (gate_notices(fit) + landmark_notices(d.alignment.landmarks)
-               + scan_notices(d.contact.curve, d.contact.on_scan, sim, mask) + fit_notices(rims, window_kpa, sim, mask))
+               + scan_notices(d.contact.curve, d.contact.on_scan, sim, mask) + fit_notices(rims, window_kpa, sim, mask, at_seal_force(fit)))
     trace = (("cpapfit version", __version__), ("date", provenance.date), ("input", provenance.source),
              ("input SHA-256", provenance.sha256), ("scan units", scan.units_note or scan.units),
              ("mask", mask), ("landmarks", f"{len(d.alignment.landmarks.points)} by {d.alignment.landmarks.path}"),
