@@ -27,15 +27,13 @@ demo: $(STAMP)
 test: $(STAMP) $(CHROMIUM) $(LIBUSB)
 	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=15
 
-# The report test opens report.html in headless Chromium: Debian's package, no browser download.
-$(CHROMIUM):
+# Debian's packages the tests need: Chromium, which opens report.html headless (no browser
+# download), and libusb, with which pyrealsense2 reads a RealSense recording.
+$(CHROMIUM): DEBIAN_PACKAGE := chromium
+$(LIBUSB): DEBIAN_PACKAGE := libusb-1.0-0
+$(CHROMIUM) $(LIBUSB):
 	apt-get update -q
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium
-
-# pyrealsense2 reads a RealSense recording with libusb: Debian's package.
-$(LIBUSB):
-	apt-get update -q
-	DEBIAN_FRONTEND=noninteractive apt-get install -y -q libusb-1.0-0
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -q $(DEBIAN_PACKAGE)
 
 clean:
 	rm -rf $(VENV) cpapfit-demo

@@ -56,16 +56,16 @@ def at_seal_force(fit: dict) -> bool:
     return seal is not None and custom.get("headgear_force_n", np.inf) <= 1.01 * seal
 
 
-def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, mask: str, at_seal_force: bool = False) -> list[Notice]:
+def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, mask: str, least_force: bool = False) -> list[Notice]:
     """The custom cushion pressing above the window's top, or open (leaking), with where;
-    `at_seal_force`: its headgear force is already the least that seals it, so that a lower force
+    `least_force` (`at_seal_force`): its headgear force is already the least that seals it, so that a lower force
     cannot ease the pressure."""
     if window_kpa is None or not has_pressure(rims):
         return []
     rim = rims["custom"]
     angle = around_seal(rim.points, similarity)
     ease = ("its headgear force is already the least that seals it, so its shape presses there (a flange sunk into a "
-            "crease or under an overhang): look at the pressure picture before making it" if at_seal_force
+            "crease or under an overhang): look at the pressure picture before making it" if least_force
             else "lower the headgear force or the interference")
     out = []
     for flag, what, advice in (
