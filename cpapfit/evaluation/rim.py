@@ -383,8 +383,12 @@ def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, sc
     - over that plane and, on a mesh, outside the triangle nearest it by the scan's own winding (the
       side most of the skin under the rim faces, `_out_sign`): in the air by its height over the
       plane. The axis went through a sheet whose far side the scan lacks (the wing of the nose seen
-      from in front, over the groove beside it). A point past the middle of a sheet whose far side
-      is in the scan stays inside, as does any such point over a point cloud (no winding to tell);
+      from in front, over the groove beside it);
+    - over that plane but behind its nearest triangle, which faces the mask (beside the edge of
+      skin the camera saw, in the crease under the wing of the nose): inside, by its distance to it,
+      not by the height of the wing over it along the axis. A point past the middle of a sheet
+      whose far side is in the scan (its nearest triangle facing away from the mask) stays inside,
+      as does any such point over a point cloud (no winding to tell);
     elsewhere, and for points the axis reads in the air, the reading along the axis (`clearance`,
     `cos` (K,); NaN clearances stay)."""
     inside = np.flatnonzero(clearance < 0)
@@ -400,7 +404,10 @@ def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, sc
     trusted = (facing >= COS_MIN) & (np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) <= STRAY_MM)
     deep, air = trusted & (across < 0), trusted & (across > 0)
     if air.any():  # the scan's winding is read only where a point may be in the air
-        air &= _outside(offset, tri, scan, _out_sign(points, clearance, scan, axis))
+        out = _out_normals(tri, scan, _out_sign(points, clearance, scan, axis))
+        outside = np.einsum("ij,ij->i", offset, out) > 0
+        deep |= air & ~outside & (out @ axis > 0)
+        air &= outside
     clearance, cos = clearance.copy(), cos.copy()
     clearance[inside[deep]] = -depth[deep] / facing[deep]
     clearance[inside[air]] = across[air] / facing[air]
@@ -420,14 +427,12 @@ def _out_sign(points: np.ndarray, clearance: np.ndarray, scan: trimesh.Trimesh |
     return 1.0 if not len(facing) or np.median(facing) >= 0 else -1.0
 
 
-def _outside(offset: np.ndarray, tri: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, out: float) -> np.ndarray:
-    """(K,) bool: the points `offset` (K, 3) mm from their nearest skin lie on the side its triangle
-    `tri` (K,) faces out (`out`: the scan's winding, `_out_sign`); False on a point cloud and where
-    there is no triangle (-1)."""
+def _out_normals(tri: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, out: float) -> np.ndarray:
+    """(K, 3) the unit normals of the triangles `tri` (K,), turned out of the skin by the scan's
+    winding `out` (`_out_sign`); zero on a point cloud and where there is no triangle (-1)."""
     if isinstance(scan, trimesh.PointCloud):
-        return np.zeros(len(offset), dtype=bool)
-    normals = out * scan.face_normals[np.maximum(tri, 0)]
-    return (tri >= 0) & (np.einsum("ij,ij->i", offset, normals) > 0)
+        return np.zeros((len(tri), 3))
+    return out * scan.face_normals[np.maximum(tri, 0)] * (tri >= 0)[:, None]
 
 
 def _closest_points(points: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
