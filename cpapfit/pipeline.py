@@ -12,6 +12,7 @@ from .align.check import FaceCheck
 from .align.initial import initial_alignment, landmark_free_alignment
 from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
+from .clustering import thinned
 from .cushion.contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet, membrane_sheet
@@ -39,6 +40,7 @@ from .template import load_template, mask_region
 from .work import ahead, at_once
 
 SURFACE_REACH_MM = 30.0  # the scan kept for pressing cushions: this near the seal bands, for any size, pushed or rolled
+SURFACE_CUBE_MM = 0.5  # a mesh denser than this (median edge) is pressed on vertex-clustered in cubes this size (rims are read at 1 mm)
 
 
 @dataclass(frozen=True)
@@ -295,9 +297,11 @@ def _thicknesses(cushion: Cushion) -> str:
 def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray | None = None) -> Face:
     """The face cushions are pressed onto: the scan within SURFACE_REACH_MM of the registered
     template's seal bands (both masks) or of a given `cushion`'s (V, 3) mm vertices, its registered
-    template, the mask axis (the template's +z carried by the similarity) and the head's up direction (its +y)."""
+    template, the mask axis (the template's +z carried by the similarity) and the head's up direction
+    (its +y). A mesh scan denser than SURFACE_CUBE_MM is `thinned` to it: the sleep states each move
+    a copy of it, with its own spatial indexes."""
     near = reg.vertices[mask_region(load_template())]
-    surface = scan_surface(scan, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM)
+    surface = thinned(scan_surface(scan, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM), SURFACE_CUBE_MM)
     return face_of(surface, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 

@@ -404,6 +404,32 @@ def test_a_rim_point_beside_a_ridge_is_pressed_by_its_distance_from_the_skin():
     assert -clearance * cos == pytest.approx(exact, abs=0.05)
 
 
+def test_a_rim_point_in_the_crease_under_the_wing_is_no_deeper_than_its_distance_from_the_skin():
+    """Skin: a flat floor rising steeply (1.5 mm per mm) into the underside of the wing of the nose,
+    seen by the camera up to x = 1 mm (a hole beyond), and the wing's front 10 mm up, seen from in
+    front. Rim points pressed 0.2-4.5 mm into the skin along the axis beside the hole: along the axis
+    the first surface up is the wing, so some read 7-10 mm deep; none reads deeper than its distance
+    from the scanned skin (0.05 mm)."""
+    from tests.test_cushion import grid_faces
+
+    def floor(x):
+        return np.where(x < 0, 0.0, 1.5 * x)
+
+    n, m = 121, 41
+    xy = np.stack(np.meshgrid(np.linspace(-15, 15, n), np.linspace(-15, 15, n)), -1).reshape(-1, 2)
+    seen = trimesh.Trimesh(np.column_stack([xy, floor(xy[:, 0])]), grid_faces(n), process=False)
+    seen = trimesh.Trimesh(seen.vertices, seen.faces[seen.triangles_center[:, 0] < 1.0], process=False)
+    seen.remove_unreferenced_vertices()
+    front = np.stack(np.meshgrid(np.linspace(-4, 10, m), np.linspace(-10, 10, m)), -1).reshape(-1, 2)
+    skin = trimesh.util.concatenate([seen, trimesh.Trimesh(np.column_stack([front, np.full(len(front), 10.0)]), grid_faces(m), process=False)])
+    points = np.array([[x, 0.3, z] for x in np.arange(-1.0, 3.01, 0.25) for z in np.arange(-1.5, 3.01, 0.25) if z < floor(x) - 0.2])
+    axis = np.array([0.0, 0.0, 1.0])
+    along, under = _skin_below(points, skin, axis)
+    clearance, cos = _nearest_skin(points, along, np.abs(_skin_planes(under, skin)[0] @ axis), skin, axis)
+    assert (along < -7.0).sum() >= 8
+    assert (-clearance * cos <= trimesh.proximity.closest_point(skin, points)[1] + 0.05).all()
+
+
 def test_a_rim_point_under_a_sheet_the_scan_sees_only_from_in_front_is_in_the_air():
     """Skin: a flat floor, and 12 mm above part of it a sheet scanned only from in front (the wing
     of the nose, its underside hidden from the camera, over the groove beside it); the floor has a

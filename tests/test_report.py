@@ -222,27 +222,6 @@ def test_the_viewer_decimates_a_dense_face_it_was_handed_read_only():
     assert np.abs(np.linalg.norm(shown.vertices, axis=1) - 50.0).max() <= 1.0
 
 
-def test_vertex_clustering_merges_each_cube_into_one_of_its_vertices():
-    """`clustered` at 4 mm on a 50 mm sphere of ~0.5 mm edges: every vertex kept is one of the
-    sphere's, one a cube; no triangle has a repeated corner or repeats another; edges span at most
-    two cubes' diagonal; the surface lies within 0.5 mm of the sphere and covers it (area within 1 %)."""
-    import trimesh
-
-    from cpapfit.report.viewer import clustered
-
-    sphere = trimesh.creation.icosphere(7, radius=50.0)
-    vertices, faces = clustered(np.array(sphere.vertices), np.array(sphere.faces), 4.0)
-    assert len(faces) < len(sphere.faces) / 20
-    assert np.isin(vertices.view([("", float)] * 3), np.asarray(sphere.vertices).view([("", float)] * 3)).all()
-    assert len(np.unique(np.floor(vertices / 4.0), axis=0)) == len(vertices)
-    assert (faces[:, 0] != faces[:, 1]).all() and (faces[:, 1] != faces[:, 2]).all() and (faces[:, 2] != faces[:, 0]).all()
-    assert len(np.unique(np.sort(faces, axis=1), axis=0)) == len(faces)
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    assert mesh.edges_unique_length.max() <= 2 * np.sqrt(3) * 4.0
-    assert np.abs(np.linalg.norm(mesh.triangles_center, axis=1) - 50.0).max() <= 0.5
-    assert mesh.area == pytest.approx(sphere.area, rel=0.01)
-
-
 def test_a_dense_crop_reaches_the_decimator_thinned(monkeypatch):
     """A crop of 327 680 triangles, for 1 000 shown: the quadric decimator (which keeps arrays the
     size of its largest input for the rest of the process) is handed the crop vertex-clustered to

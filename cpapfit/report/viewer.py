@@ -10,6 +10,7 @@ import plotly.io as pio
 import trimesh
 from scipy.spatial import cKDTree
 
+from ..clustering import clustered
 from ..similarity import Similarity
 from .figure import ColourScale
 from .frame import Face
@@ -38,16 +39,6 @@ def viewer_face(face: Face, centre: np.ndarray, radius_mm: float = CROP_MM, max_
     if len(mesh.faces) > max_triangles:
         mesh = mesh.simplify_quadric_decimation(face_count=max_triangles)
     return Face(np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64))
-
-
-def clustered(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """((M, 3) mm vertices, (T, 3) int64 triangles): the mesh of (N, 3) mm `vertices` and (F, 3)
-    `faces` with each cube_mm cube's vertices merged into the first of them; triangles left with
-    fewer than three corners, and repeats, dropped."""
-    _, first, inverse = np.unique(np.floor(vertices / cube_mm).astype(np.int64), axis=0, return_index=True, return_inverse=True)
-    merged = inverse.reshape(-1)[faces]
-    merged = merged[(merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])]
-    return vertices[first], merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
 
 
 def rim_values_on(vertices: np.ndarray, rim: np.ndarray, values: np.ndarray, axis: np.ndarray) -> np.ndarray:
