@@ -21,9 +21,9 @@ mapped onto the ICT face, `template_truth`):
 Silently wrong: made, not flagged, band mean over 2 mm; misplaced: band mean over 5 mm (made at all).
 Awake, the custom cushion at its force on the scan: leak, peak pressure and window (`fit.json`'s), and
 how deep the fit model presses each rim point (its travel along the axis times |cos|) against that
-point's exact depth under the scan at the equilibrium (its distance to the nearest point of the
-scan's triangles, `trimesh.proximity`): the 95th percentile and largest difference over the rim
-points in contact.
+point's depth in the true face at the equilibrium (its distance to the nearest point of the truth's
+triangles, `trimesh.proximity`): the 95th percentile and largest difference over the rim points in
+contact.
 
 Usage: .venv/bin/python bench/ict_population.py [--seeds 50] [--first 2000] [--workers 2] [--kinds capture mesh] [--masks nasal oronasal]
        [--model NPZ | --model shipped]
@@ -53,7 +53,7 @@ from cpapfit.io.write import write_files
 from cpapfit.synthetic.camera import FRAMED, to_camera
 from cpapfit.evaluation.fit import FitParams
 from cpapfit.evaluation.mechanics import COS_MIN
-from cpapfit.pipeline import design, face_for, place_template
+from cpapfit.pipeline import design, place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import MASKS, load_template
 
@@ -119,24 +119,24 @@ def _measured(row: dict, scan, placed, truth: np.ndarray, marks: np.ndarray) -> 
         **{g.code: g.value for g in d.quality.gates if g.code in ("depth_ratio", "face_size")},
         "true_depth_ratio": proportions(template.vertices, d.alignment.similarity, replace(d.registration, vertices=truth)).depth_ratio,
         "leak_l_min": fit["leak_l_min"], "peak_kpa": fit["pressure_max_kpa"], "window": fit["window_fraction"],
-        **depth_error(d.fits["custom"], face_for(scan, d.alignment, d.registration).scan),
+        **depth_error(d.fits["custom"], trimesh.Trimesh(truth, template.faces, process=False)),
     }
 
 
-def depth_error(fit, scan: trimesh.Trimesh) -> dict:
+def depth_error(fit, truth: trimesh.Trimesh) -> dict:
     """The fit model's depth of each rim point in contact (mm: travel along the axis times |cos|)
-    against its distance under the `scan` mesh at the equilibrium (which side of the skin: the
-    vertex normals at the nearest point): p95 and largest |difference| (NaN with no contact). Both
-    read the nearest skin, so this measures the model's linear law and its skin normals, not which
-    skin it should have pressed."""
+    against its depth in the `truth` (the true face, whole, in the template's triangles) at the
+    equilibrium (which side of the skin: the vertex normals at the nearest point): p95 and largest
+    |difference| (NaN with no contact). This measures the whole reading on a scan: which skin, how
+    deep under it, and the model's linear law."""
     rim, c = fit.rim, fit.rim.covered
     cos = np.maximum(rim.cos[c], COS_MIN)
     travel = fit.pressed.pressure_kpa / (fit.stiffness.effective[c] * cos)
     at = rim.points[c] - (travel + rim.clearance[c])[:, None] * rim.axis  # each rim point where the mask came to rest
-    nearest, distance, tri = trimesh.proximity.closest_point(scan, at)
-    corners = np.asarray(scan.faces)[tri]
-    weights = trimesh.triangles.points_to_barycentric(np.asarray(scan.vertices)[corners], nearest)
-    out = np.einsum("kj,kjc->kc", weights, np.asarray(scan.vertex_normals)[corners])
+    nearest, distance, tri = trimesh.proximity.closest_point(truth, at)
+    corners = np.asarray(truth.faces)[tri]
+    weights = trimesh.triangles.points_to_barycentric(np.asarray(truth.vertices)[corners], nearest)
+    out = np.einsum("kj,kjc->kc", weights, np.asarray(truth.vertex_normals)[corners])
     out *= np.sign(np.median(out @ rim.axis))  # out of the face
     exact = distance * np.where(np.einsum("ij,ij->i", at - nearest, out) < 0, 1.0, -1.0)
     error = np.abs(travel * cos - exact)[travel > 0]
