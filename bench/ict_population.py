@@ -119,8 +119,17 @@ def _measured(row: dict, scan, placed, truth: np.ndarray, marks: np.ndarray) -> 
         **{g.code: g.value for g in d.quality.gates if g.code in ("depth_ratio", "face_size")},
         "true_depth_ratio": proportions(template.vertices, d.alignment.similarity, replace(d.registration, vertices=truth)).depth_ratio,
         "leak_l_min": fit["leak_l_min"], "peak_kpa": fit["pressure_max_kpa"], "window": fit["window_fraction"],
-        **depth_error(d.fits["custom"], trimesh.Trimesh(truth, template.faces, process=False)),
+        **depth_error(d.fits["custom"], true_face(truth, template.faces)),
     }
+
+
+def true_face(truth: np.ndarray, faces: np.ndarray) -> trimesh.Trimesh:
+    """The true face (N, 3) mm in the template's (F, 3) triangles, less those of no height (the
+    template's closest-point map onto the ICT face leaves slivers in the crease under the wing of
+    the nose, whose barycentric coordinates are NaN)."""
+    mesh = trimesh.Trimesh(truth, faces, process=False)
+    mesh.update_faces(mesh.nondegenerate_faces(height=1e-4))
+    return mesh
 
 
 def depth_error(fit, truth: trimesh.Trimesh) -> dict:
@@ -137,9 +146,9 @@ def depth_error(fit, truth: trimesh.Trimesh) -> dict:
     corners = np.asarray(truth.faces)[tri]
     weights = trimesh.triangles.points_to_barycentric(np.asarray(truth.vertices)[corners], nearest)
     out = np.einsum("kj,kjc->kc", weights, np.asarray(truth.vertex_normals)[corners])
-    out *= np.sign(np.median(out @ rim.axis))  # out of the face
+    out *= np.sign(np.nanmedian(out @ rim.axis))  # out of the face
     exact = distance * np.where(np.einsum("ij,ij->i", at - nearest, out) < 0, 1.0, -1.0)
-    error = np.abs(travel * cos - exact)[travel > 0]
+    error = np.abs(travel * cos - exact)[(travel > 0) & np.isfinite(out).all(axis=1)]
     if not len(error):
         return {"depth_err_p95_mm": float("nan"), "depth_err_max_mm": float("nan")}
     return {"depth_err_p95_mm": float(np.percentile(error, 95)), "depth_err_max_mm": float(error.max())}

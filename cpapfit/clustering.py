@@ -1,38 +1,41 @@
 """Vertex clustering: a dense mesh thinned by merging the vertices in each cube of a grid into their
 mean (off a surface of radius R by at most about cube^2 / (8 R): 6 um at 0.5 mm on a 5 mm curve),
-for the 3-D view and for pressing cushions on a scan far denser than the fit reads the skin."""
+for the 3-D view and for pressing cushions on a scan far denser than the fit reads the skin. Sheets
+of the mesh nearer each other than a cube (the lips closed on each other) are merged where they
+share one."""
 
 import numpy as np
 import trimesh
 
 
+def median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """The median length (mm) of the first edge of each of the (F, 3) `faces` over (N, 3) `vertices`."""
+    return float(np.median(np.linalg.norm(vertices[faces[:, 0]] - vertices[faces[:, 1]], axis=1)))
+
+
 def clustered(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """((M, 3) mm vertices, (T, 3) int64 triangles): the mesh of (N, 3) mm `vertices` and (F, 3)
-    `faces` with each cube_mm cube's vertices merged into their mean; triangles left with fewer
-    than three corners, turned over (facing against the triangle they came from), and repeats,
-    dropped."""
-    _, inverse, count = np.unique(np.floor(vertices / cube_mm).astype(np.int64), axis=0, return_inverse=True, return_counts=True)
+    `faces` with the vertices of its triangles in each cube_mm cube merged into their mean (those
+    in no triangle dropped); triangles left with fewer than three corners, turned over (facing
+    against the triangle they came from), and repeats, dropped."""
+    used = np.unique(faces)
+    _, inverse, count = np.unique(np.floor(vertices[used] / cube_mm).astype(np.int64), axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
-    kept = np.stack([np.bincount(inverse, weights=vertices[:, c]) for c in range(3)], axis=1) / count[:, None]
-    merged = inverse[faces]
+    kept = np.stack([np.bincount(inverse, weights=vertices[used, c]) for c in range(3)], axis=1) / count[:, None]
+    merged = inverse[np.searchsorted(used, faces)]
     whole = (merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])
     merged, faces = merged[whole], faces[whole]
-    merged = merged[np.einsum("ij,ij->i", _cross(kept, merged), _cross(vertices, faces)) > 0]
+    upright = np.einsum("ij,ij->i", trimesh.triangles.cross(kept[merged]), trimesh.triangles.cross(vertices[faces])) > 0
+    merged = merged[upright]
     return kept, merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
 
 
-def _cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F, 3) each triangle's edge cross product (its normal times twice its area)."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return np.cross(b - a, c - a)
-
-
 def thinned(surface: trimesh.Trimesh | trimesh.PointCloud, cube_mm: float) -> trimesh.Trimesh | trimesh.PointCloud:
-    """A mesh whose median edge is shorter than cube_mm `clustered` in cubes that size; a coarser
+    """A mesh whose `median_edge` is shorter than cube_mm `clustered` in cubes that size; a coarser
     mesh, or a point cloud, as it is."""
     if not isinstance(surface, trimesh.Trimesh) or not len(surface.faces):
         return surface
     vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
-    if np.median(np.linalg.norm(vertices[faces] - vertices[np.roll(faces, 1, axis=1)], axis=2)) >= cube_mm:
+    if median_edge(vertices, faces) >= cube_mm:
         return surface
     return trimesh.Trimesh(*clustered(vertices, faces, cube_mm), process=False)

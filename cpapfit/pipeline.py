@@ -40,7 +40,7 @@ from .template import load_template, mask_region
 from .work import ahead, at_once
 
 SURFACE_REACH_MM = 30.0  # the scan kept for pressing cushions: this near the seal bands, for any size, pushed or rolled
-SURFACE_CUBE_MM = 0.5  # a mesh denser than this (median edge) is pressed on vertex-clustered in cubes this size (rims are read at 1 mm)
+SURFACE_CUBE_MM = 0.5  # that scan, a mesh denser than this (median edge), vertex-clustered in cubes this size (rims are read at 1 mm)
 
 
 @dataclass(frozen=True)
@@ -298,8 +298,9 @@ def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray |
     """The face cushions are pressed onto: the scan within SURFACE_REACH_MM of the registered
     template's seal bands (both masks) or of a given `cushion`'s (V, 3) mm vertices, its registered
     template, the mask axis (the template's +z carried by the similarity) and the head's up direction
-    (its +y). A mesh scan denser than SURFACE_CUBE_MM is `thinned` to it: the sleep states each move
-    a copy of it, with its own spatial indexes."""
+    (its +y). A mesh scan denser than SURFACE_CUBE_MM is `thinned` to it: the seal curve is carried
+    onto it and every cushion pressed on it, and the sleep states each move a copy of it with its
+    own spatial indexes."""
     near = reg.vertices[mask_region(load_template())]
     surface = thinned(scan_surface(scan, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM), SURFACE_CUBE_MM)
     return face_of(surface, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])

@@ -407,9 +407,9 @@ def test_a_rim_point_beside_a_ridge_is_pressed_by_its_distance_from_the_skin():
 def test_a_rim_point_in_the_crease_under_the_wing_is_no_deeper_than_its_distance_from_the_skin():
     """Skin: a flat floor rising steeply (1.5 mm per mm) into the underside of the wing of the nose,
     seen by the camera up to x = 1 mm (a hole beyond), and the wing's front 10 mm up, seen from in
-    front. Rim points pressed 0.2-4.5 mm into the skin along the axis beside the hole: along the axis
-    the first surface up is the wing, so some read 7-10 mm deep; none reads deeper than its distance
-    from the scanned skin (0.05 mm)."""
+    front. Rim points 0.25-6 mm under the floor along the axis, some past the hole's edge: along the
+    axis the first surface up is the wing's front, so past the edge they read 7-10 mm deep; each
+    reads inside the skin by its distance from the scanned skin (0.05 mm)."""
     from tests.test_cushion import grid_faces
 
     def floor(x):
@@ -426,8 +426,9 @@ def test_a_rim_point_in_the_crease_under_the_wing_is_no_deeper_than_its_distance
     axis = np.array([0.0, 0.0, 1.0])
     along, under = _skin_below(points, skin, axis)
     clearance, cos = _nearest_skin(points, along, np.abs(_skin_planes(under, skin)[0] @ axis), skin, axis)
-    assert (along < -7.0).sum() >= 8
-    assert (-clearance * cos <= trimesh.proximity.closest_point(skin, points)[1] + 0.05).all()
+    assert (along[points[:, 0] > 1.0] < -7.0).sum() >= 8
+    assert (clearance < 0).all()
+    assert -clearance * cos == pytest.approx(trimesh.proximity.closest_point(skin, points)[1], abs=0.05)
 
 
 def test_a_rim_point_under_a_sheet_the_scan_sees_only_from_in_front_is_in_the_air():

@@ -12,6 +12,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..scan import Scan
+from ..clustering import median_edge
 from ..rims import boundary_vertices
 
 
@@ -39,7 +40,7 @@ def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
     """The lookup structure for a scan. A mesh scan twice as coarse as `spacing_mm` is subdivided
     first (see `subdivided`), so that its nearest vertex is near its nearest surface point."""
     vertices, faces, normals, boundary = scan.vertices, scan.faces, scan.normals, scan.rims
-    if not scan.is_capture and len(faces) and _median_edge(vertices, faces) > 2.0 * spacing_mm:
+    if not scan.is_capture and len(faces) and median_edge(vertices, faces) > 2.0 * spacing_mm:
         vertices, faces = subdivided(vertices, faces, 1.5 * spacing_mm)
         normals = _subdivided_normals(scan, vertices, faces)
         boundary = boundary_vertices(vertices, faces)
@@ -50,13 +51,9 @@ def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
 def subdivided(vertices: np.ndarray, faces: np.ndarray, edge_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """Every triangle split into four (edge midpoints shared, so no cracks) as often as it takes the
     median edge to `edge_mm` or less: the surface is unchanged, its rims stay its only rims."""
-    for _ in range(int(np.ceil(np.log2(_median_edge(vertices, faces) / edge_mm)))):
+    for _ in range(int(np.ceil(np.log2(median_edge(vertices, faces) / edge_mm)))):
         vertices, faces = trimesh.remesh.subdivide(vertices, faces)
     return vertices, faces
-
-
-def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
-    return float(np.median(np.linalg.norm(vertices[faces[:, 0]] - vertices[faces[:, 1]], axis=1)))
 
 
 def _subdivided_normals(scan: Scan, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -54,6 +54,7 @@ import qdldl
 from scipy.sparse import csr_matrix, diags
 from scipy.spatial import cKDTree
 
+from ..clustering import median_edge
 from ..frozen import freeze_arrays
 from ..landmarks.types import Landmarks
 from ..scan import Scan
@@ -200,7 +201,7 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
-    target = oriented(make_target(scan, use_grid, _median_edge(aligned, faces)), aligned, normals)
+    target = oriented(make_target(scan, use_grid, median_edge(aligned, faces)), aligned, normals)
     lap = laplacian(aligned, faces)
     starts = [lambda: _affine_start(aligned, normals, target, landmarks, params)]
     if basis is not None and params.morphable is not None:
@@ -279,10 +280,6 @@ def _affine_start(aligned: np.ndarray, normals: np.ndarray, target: Target, land
     gates = (params.max_distance_mm, params.max_normal_deg)
     starts = starts_from(aligned[landmarks[0]], landmarks[1], params.affine.max_stretch)
     return apply_affine(fit_affine(aligned, normals, target, weights, gates, params.affine, starts), aligned)
-
-
-def _median_edge(vertices: np.ndarray, faces: np.ndarray) -> float:
-    return float(np.median(np.linalg.norm(vertices[faces[:, 0]] - vertices[faces[:, 1]], axis=1)))
 
 
 def _plane_distance(points: np.ndarray, m, target: Target) -> np.ndarray:
