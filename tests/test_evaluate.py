@@ -408,7 +408,7 @@ def test_a_rim_point_in_the_crease_under_the_wing_is_no_deeper_than_its_distance
     """Skin: a flat floor rising steeply (1.5 mm per mm) into the underside of the wing of the nose,
     seen by the camera up to x = 1 mm (a hole beyond), and the wing's front 10 mm up, seen from in
     front. Rim points 0.25-6 mm under the floor along the axis, some past the hole's edge: along the
-    axis the first surface up is the wing's front, so past the edge they read 7-10 mm deep; each
+    axis the first surface up is the wing's front, so past the edge they read 7-11.5 mm deep; each
     reads inside the skin by its distance from the scanned skin (0.05 mm)."""
     from tests.test_cushion import grid_faces
 
