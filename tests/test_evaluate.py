@@ -431,6 +431,50 @@ def test_a_rim_point_in_the_crease_under_the_wing_is_no_deeper_than_its_distance
     assert -clearance * cos == pytest.approx(trimesh.proximity.closest_point(skin, points)[1], abs=0.05)
 
 
+def test_a_rim_point_under_a_triangle_spanning_the_crease_is_pressed_by_its_distance_from_it():
+    """A capture's skin, 1.2 mm apart: a floor up to the crease under the wing of the nose, long
+    triangles spanning the crease up to the wing's lip 3 mm across and 6 mm up, a hole beside them
+    (skin the camera missed) and the wing's front 10 mm up. Rim points 2 mm under the spanning
+    triangles, beside the hole: along the axis the first surface up is the wing's front (9 mm);
+    their nearest skin lies on a spanning triangle, 1.1 mm over the mean of the floor's vertices
+    near it (the skin bending away round it, not a spike standing out of it), so each is pressed
+    by its distance from that skin (0.9-1.2 mm)."""
+    from tests.test_cushion import grid_faces
+
+    n = 12
+    x, y = np.meshgrid(np.append(np.arange(-12.0, 0.1, 1.2), 3.0), np.arange(-7.2, 6.1, 1.2))
+    skin = trimesh.Trimesh(np.column_stack([x.ravel(), y.ravel(), np.where(x.ravel() > 0, 6.0, 0.0)]), grid_faces(n), process=False)
+    centre = skin.triangles_center
+    skin = trimesh.Trimesh(skin.vertices, skin.faces[~((centre[:, 0] > 0) & (centre[:, 1] > 0))], process=False)
+    front = np.stack(np.meshgrid(np.linspace(-4, 12, 41), np.linspace(-12, 12, 41)), -1).reshape(-1, 2)
+    skin = trimesh.util.concatenate([skin, trimesh.Trimesh(np.column_stack([front, np.full(len(front), 10.0)]), grid_faces(41), process=False)])
+    points = np.array([[1.5, 0.3, 1.0], [1.5, 0.8, 1.0], [1.0, 0.8, 0.6]])
+    axis = np.array([0.0, 0.0, 1.0])
+    along, under = _skin_below(points, skin, axis)
+    clearance, cos = _nearest_skin(points, along, np.abs(_skin_planes(under, skin)[0] @ axis), skin, axis)
+    assert along == pytest.approx(points[:, 2] - 10.0, abs=1e-6)
+    assert -clearance * cos == pytest.approx(trimesh.proximity.closest_point(skin, points)[1], abs=0.02)
+
+
+def test_a_rim_point_over_a_flap_curled_under_the_skin_is_pressed_by_its_depth_under_the_skin():
+    """A flat skin (0.5 mm grid) and, 1.5 mm under it, a 1 mm flap of a torn edge curled under
+    the surface. A rim point 1.2 mm under the skin, 0.3 mm over the flap: its nearest skin, the
+    flap, lies 1.2 mm under the mean of the skin around it, so the point is pressed by its depth
+    along the axis (1.2 mm), not by its distance to the flap."""
+    from tests.test_cushion import grid_faces
+
+    n, m = 61, 3
+    xy = np.stack(np.meshgrid(np.linspace(-15, 15, n), np.linspace(-15, 15, n)), -1).reshape(-1, 2)
+    flap = np.stack(np.meshgrid(np.linspace(-0.5, 0.5, m), np.linspace(-0.5, 0.5, m)), -1).reshape(-1, 2)
+    skin = trimesh.util.concatenate([trimesh.Trimesh(np.column_stack([xy, np.zeros(len(xy))]), grid_faces(n), process=False),
+                                     trimesh.Trimesh(np.column_stack([flap, np.full(len(flap), -1.5)]), grid_faces(m), process=False)])
+    points = np.array([[0.1, 0.2, -1.2]])
+    axis = np.array([0.0, 0.0, 1.0])
+    along, under = _skin_below(points, skin, axis)
+    clearance, cos = _nearest_skin(points, along, np.abs(_skin_planes(under, skin)[0] @ axis), skin, axis)
+    assert -clearance * cos == pytest.approx([1.2], abs=0.01)
+
+
 def test_a_rim_point_under_a_sheet_the_scan_sees_only_from_in_front_is_in_the_air():
     """Skin: a flat floor, and 12 mm above part of it a sheet scanned only from in front (the wing
     of the nose, its underside hidden from the camera, over the groove beside it); the floor has a

@@ -43,7 +43,7 @@ MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
 CANDIDATES = 8  # the nearest skin on a mesh: on the triangles around this many nearest vertices
-STRAY_MM = 1.0  # the nearest skin this far off the plane of the scan around it is a spike, not skin
+STRAY_MM = 1.0  # the nearest skin this far under the plane of the scan around it is a flap curled under, not skin
 
 
 @dataclass(frozen=True)
@@ -374,8 +374,10 @@ def _row_sums(values: np.ndarray, row: np.ndarray, rows: int) -> np.ndarray:
 def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
                   axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(clearance (K,) mm, |cos| (K,)) of (K, 3) rim points, those the axis reads inside the skin
-    measured to the nearest skin, where that skin faces the axis at least COS_MIN and lies within
-    STRAY_MM of the plane of the scan around it (else a torn edge's spike), over the |cos| of the
+    measured to the nearest skin, where that skin faces the axis at least COS_MIN and lies no more
+    than STRAY_MM under the plane of the scan around it (else a flap of a torn edge curled under
+    the skin; skin standing over that plane is skin bending away round it, or a triangle spanning
+    a crease whose vertices lie below it), over the |cos| of the
     scan's NORMAL_MM normal there, which is how fast the reading changes as the mask moves along
     the axis:
     - under the plane of that skin: inside, by its distance to it (a point cloud's: its depth under
@@ -401,7 +403,7 @@ def _nearest_skin(points: np.ndarray, clearance: np.ndarray, cos: np.ndarray, sc
     across = np.einsum("ij,ij->i", offset, normal)
     depth = -across if isinstance(scan, trimesh.PointCloud) else np.linalg.norm(offset, axis=1)
     facing = normal @ axis
-    trusted = (facing >= COS_MIN) & (np.abs(np.einsum("ij,ij->i", nearest - centre, normal)) <= STRAY_MM)
+    trusted = (facing >= COS_MIN) & (np.einsum("ij,ij->i", nearest - centre, normal) >= -STRAY_MM)
     deep, air = trusted & (across < 0), trusted & (across > 0)
     if air.any():  # the scan's winding is read only where a point may be in the air
         out = _out_normals(tri, scan, _out_sign(points, clearance, scan, axis))

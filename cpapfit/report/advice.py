@@ -64,8 +64,8 @@ def fit_notices(rims: dict, window_kpa: tuple | None, similarity: Similarity, ma
         return []
     rim = rims["custom"]
     angle = around_seal(rim.points, similarity)
-    ease = ("its headgear force is already the least that seals it, so its shape presses there (a flange sunk into a "
-            "crease or under an overhang): look at the pressure picture before making it" if least_force
+    ease = ("its headgear force is already the least that seals it, so a lower force would open the seal and its shape "
+            "presses there: look at the pressure picture before making it" if least_force
             else "lower the headgear force or the interference")
     out = []
     for flag, what, advice in (
