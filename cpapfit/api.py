@@ -18,6 +18,7 @@ from .align.nonrigid import NonrigidParams
 from .cushion.nurbs import CushionParams
 from .errors import InputError
 from .evaluation.fit import FitParams
+from .evaluation.rim import require_dense
 from .io import load_scan
 from .io.landmarks import user_landmarks
 from .io.phantom import write_phantom
@@ -110,6 +111,7 @@ def evaluate(scan: Scan, cushion, mask: str | None = None, generic: bool = False
         raise InputError("generic, stock and states need the mask (nasal or oronasal): which cushion to compare with, which states to press")
     placed = place_template(scan, user_landmarks(landmarks, scan), params=params.registration, quality=params.quality,
                             landmark_noise=params.landmark_noise)
+    require_dense(scan)
     face = face_for(scan, placed.alignment, placed.registration, cushion.vertices)
     cushions = evaluated_cushions(placed.alignment, cushion, mask if generic else None, params.cushion)
     if states:

@@ -21,10 +21,11 @@ from .cushion.compensation import Preload, compensated_cushion
 from .cushion.envelope import enveloped_cushion, headgear_force
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, face_of, fit_cushion
 from .evaluation.gap import RimGap, rim_gap
+from .evaluation.rim import require_dense
 from .evaluation.states import FaceState, StateFit, fit_states, sleep_states, state_faces, state_params
 from .errors import NoStockSeat
 from .fabrication.dead_space import dead_space_ml, ring_clearance
-from .fabrication.files import SolidError, check_closed, check_solid
+from .fabrication.files import SolidError, check_closed, check_solid, written_clean
 from .fabrication.frame import Frame, build_frame
 from .fabrication.mould import mould
 from .quality.proportions import proportions
@@ -203,6 +204,7 @@ def design(
     if stock:
         ahead(submit, stock_solids, mask, stock, params)
     placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality, landmark_noise)
+    require_dense(scan)
     al, reg = placement.alignment, placement.registration
     judged = assessed(scan, mask, placement, params, quality, on_stage)  # or refused: rescan
     face, contact = judged.face, judged.contact
@@ -215,6 +217,7 @@ def design(
     awake = fit_cushion(solid, face, params.flange_mm, None, fit_params)
     asleep = state_faces(face, sleep_states(mask))
     cushion, solid, membrane = enveloped_cushion(contact, face, reg.vertices, cushion, preload.mm, solid, fit_params, awake, asleep)
+    solid = written_clean(solid)
     checks = _checked(cushion, solid, (wall, params.wall_mm), membrane, f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould, frame")
     moulded = mould(cushion, solid)

@@ -182,6 +182,12 @@ def _(d, s):
     return [mesh_file(d / "egg.ply", egg)], ["no face found"]  # a point cloud: the landmark-free path
 
 
+@case("a point cloud of a face too sparse to press a cushion on")
+def _(d, s):
+    kept = np.unique(np.floor(s.ph.surface / 3.5), axis=0, return_index=True)[1]  # one point per 3.5 mm cube
+    return [mesh_file(d / "sparse.ply", s.ph.surface[np.sort(kept)])], ["mm apart, too sparse", "export a denser cloud, or a mesh"]
+
+
 @case("a scan larger than a head, no face in it")
 def _(d, s):
     blob = trimesh.creation.icosphere(4, radius=1.0)  # 900 mm across in mm: a bust's size, read as mm

@@ -67,12 +67,33 @@ def test_sheets_touching_along_an_edge_are_parted_before_writing():
     the mould's clean-up cuts them apart there, losing a negligible volume."""
     import manifold3d
 
-    from cpapfit.fabrication.mould import _clean_as_written
+    from cpapfit.fabrication.files import clean_as_written
 
     cube = manifold3d.Manifold.cube([10.0, 10.0, 10.0])
     pair = manifold3d.Manifold.compose([cube, cube.translate([10.0, 10.0, 0.0])])
     with pytest.raises(SolidError):
         checked_files(trimesh.Trimesh(pair.to_mesh().vert_properties, pair.to_mesh().tri_verts), "pair")
-    parted = _clean_as_written(pair)
+    parted = clean_as_written(pair)
     assert check_file(read_stl(checked_files(parted, "pair")["pair.stl"]), "pair.stl")["edges_not_in_two_triangles"] == 0
     assert parted.volume == pytest.approx(2000.0, rel=1e-3)
+
+
+def test_a_solid_two_metres_from_the_origin_is_welded_where_its_file_would_merge_vertices():
+    """A closed box with one triangle split about a point 0.05 µm from a corner: clean as written at
+    the origin (kept as it is); 2 m out on every axis the float32 file merges the point into the
+    corner (two triangles of no area, their edges unpaired), so it is welded there first, with the
+    same volume to 1e-6 mm3, and its file reads back clean."""
+    from cpapfit.fabrication.files import written_clean
+
+    a, b, c = BOX.faces[0]
+    towards = BOX.vertices[b] + BOX.vertices[c] - 2 * BOX.vertices[a]
+    vertices = np.vstack([BOX.vertices, BOX.vertices[a] + 5e-5 * towards / np.linalg.norm(towards)])
+    k = len(vertices) - 1
+    split = trimesh.Trimesh(vertices, np.vstack([BOX.faces[1:], [[k, b, c], [a, b, k], [a, k, c]]]), process=False)
+    assert written_clean(split) is split
+    far = trimesh.Trimesh(split.vertices + 2000.0, split.faces, process=False)
+    with pytest.raises(SolidError, match="not a closed 2-manifold"):
+        checked_files(far, "far")
+    welded = written_clean(far)
+    assert welded.volume == pytest.approx(far.volume, abs=1e-6)
+    assert check_file(read_stl(checked_files(welded, "far")["far.stl"]), "far.stl")["zero_area_triangles"] == 0

@@ -23,6 +23,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import InputError
 from ..frozen import freeze_arrays
+from ..scan import Scan
 from ..tangents import across
 from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_thickness_mm
 from ..thresholds import MIN_COVERED
@@ -245,12 +246,23 @@ def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
 
 def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:
     """The likely reason a rim finds no skin under it, in words."""
-    if isinstance(scan, trimesh.PointCloud):
-        apart = spacing(cKDTree(np.asarray(scan.vertices)))
-        if apart > CLOUD_RADIUS_MM:
-            return (f"the point cloud's points lie {apart:.1f} mm apart, too sparse to find the skin under the rim "
-                    f"(it needs points within {CLOUD_RADIUS_MM:g} mm of it): export a denser cloud, or a mesh")
-    return "is the cushion in this scan's frame, in mm?"
+    return (isinstance(scan, trimesh.PointCloud) and _too_sparse(np.asarray(scan.vertices))) or "is the cushion in this scan's frame, in mm?"
+
+
+def _too_sparse(cloud: np.ndarray) -> str:
+    """Why a point cloud of (N, 3) mm points is too sparse to press a cushion on, in words; "" if not."""
+    apart = spacing(cKDTree(cloud))
+    if apart <= CLOUD_RADIUS_MM:
+        return ""
+    return (f"the point cloud's points lie {apart:.1f} mm apart, too sparse to find the skin under the rim "
+            f"(it needs points within {CLOUD_RADIUS_MM:g} mm of it): export a denser cloud, or a mesh")
+
+
+def require_dense(scan: Scan) -> None:
+    """InputError, before any work, for a point cloud too sparse to press a cushion on (`_too_sparse`)."""
+    why = scan.is_point_cloud and _too_sparse(scan.vertices)
+    if why:
+        raise InputError(f"{scan.source}: {why}")
 
 
 def spacing(tree: cKDTree, sample: int = 2000) -> float:

@@ -12,10 +12,14 @@ import trimesh
 
 from ..errors import CpapfitError
 from ..rims import edge_uses
-from ..solids import self_intersecting_edges, to_manifold
+from ..solids import self_intersecting_edges, to_manifold, to_trimesh
 from ..thresholds import WALL_TOLERANCE, ZERO_AREA_MM2
 
 
+WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
+PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
+CLEAN_PASSES = 3  # welds (and pinch cuts) a part gets at most to be clean as written
+SLIVER_MM3 = 0.1  # a piece of a part smaller than this is a boolean's sliver, not material
 STL_RECORD = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attributes", "<u2")])
 
 
@@ -100,6 +104,43 @@ def unpaired_edges(mesh: trimesh.Trimesh) -> np.ndarray:
     """(K, 2) the edges of a mesh not in exactly two of its triangles (vertex indices)."""
     edges, uses = edge_uses(mesh.faces)
     return edges[uses != 2]
+
+
+def written_clean(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """`mesh` where its file reads back as a clean closed 2-manifold (`check_file`), else
+    `clean_as_written`: far from the origin float32 corners merge vertices that a boolean left
+    microns apart (a scan 2 m from its origin)."""
+    back = as_written(mesh)
+    if not len(unpaired_edges(back)) and back.area_faces.min() >= ZERO_AREA_MM2:
+        return mesh
+    return clean_as_written(to_manifold(mesh))
+
+
+def clean_as_written(part: manifold3d.Manifold) -> trimesh.Trimesh:
+    """A part made clean as its float32 file reads back (`files.check_file`): `_welded`, and again
+    while the file would still hold a triangle under ZERO_AREA_MM2 (a weld's output rounded to
+    float32 can leave two vertices one float32 step apart) or two sheets touching along an edge
+    (an edge of the file in four triangles: a bar PINCH_MM across is cut out along it first), at
+    most CLEAN_PASSES times; what is left the check at writing refuses."""
+    welded = _welded(part)
+    corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    for _ in range(CLEAN_PASSES):
+        written = as_written(to_trimesh(welded))
+        pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
+        if not len(pinches) and written.area_faces.min() >= ZERO_AREA_MM2:
+            break
+        for ends in pinches:
+            welded = welded - manifold3d.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
+        welded = _welded(welded)
+    return to_trimesh(welded)
+
+
+def _welded(part: manifold3d.Manifold) -> manifold3d.Manifold:
+    """A part with its vertices rounded to float32, as its file holds them, and those then within
+    WELD_MM (those that coincide) merged (manifold3d), dropping the slivers this parts from it
+    (under SLIVER_MM3)."""
+    welded = to_manifold(to_trimesh(part)).simplify(WELD_MM)
+    return manifold3d.Manifold.compose([body for body in welded.decompose() if body.volume() >= SLIVER_MM3])
 
 
 def as_written(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

@@ -20,6 +20,7 @@ import trimesh
 
 from ..cushion.nurbs import FRAME_RING_MM, Cushion
 from ..solids import to_manifold, to_trimesh
+from .files import written_clean
 from ..frozen import freeze_arrays
 from .vents import Vents, sized_vents
 
@@ -122,7 +123,7 @@ def build_frame(cushion: Cushion, solid: trimesh.Trimesh) -> Frame:
     rotation, at = to_scan[:3, :3], to_scan[:3, 3]
     scan = lambda p: np.asarray(p) @ rotation.T + at  # noqa: E731
     return Frame(
-        to_trimesh((shell - end).transform(place)), to_trimesh((air - end).transform(place)),
+        written_clean(to_trimesh((shell - end).transform(place))), to_trimesh((air - end).transform(place)),
         scan([0.0, 0.0, top + SHOULDER_MM[1] + CONE_MM]), rotation[:, 2],
         vents, np.stack([np.stack([scan(p), rotation @ d]) for p, d in holes]),
         None if valve is None else np.stack([scan(valve[0]), rotation @ valve[1]]),

@@ -27,19 +27,14 @@ from ..cushion.nurbs import Cushion
 from ..cushion.solid import sheet_faces
 from .draft import Draft, draft
 from ..solids import to_manifold, to_trimesh
-from .files import as_written, unpaired_edges
+from .files import clean_as_written
 from .parting import AWAY_MM, GRID_MM, between, under
-from ..thresholds import ZERO_AREA_MM2
 
 MARGIN_MM = 8.0  # mould wall around the cushion
 SPOUT_MM, VENT_MM = 6.0, 2.0  # diameters
 PRINT_MM = 4.0  # the core reaches this far past each of the cushion's openings: no face of it lies in the plane of the cushion's end
 CHANNEL_DIP_MM = 0.5  # channels start this far inside the cavity: none of their faces lies in the plane of the cushion's end
 KEY_MM, KEY_CLEARANCE_MM = 3.0, 0.2  # key sphere radius, socket clearance
-WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
-PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
-CLEAN_PASSES = 3  # welds (and pinch cuts) a part gets at most to be clean as written
-SLIVER_MM3 = 0.1  # a piece of a mould part smaller than this is a boolean's sliver, not material
 PROBE_MM = 0.01  # a part's face touches the cast when the cast is this far off it
 PROBE_RAYS = np.array([[0.4395, 0.6176, 0.6522], [-0.7071, 0.5, 0.5], [0.2673, -0.5345, 0.8018]])  # fixed: no random retries
 
@@ -89,7 +84,7 @@ def mould(cushion: Cushion, solid: trimesh.Trimesh, n_u: int = 128, n_v: int = 2
     for k, diameter in ((0, SPOUT_MM), (n_u // 4, VENT_MM), (n_u // 2, VENT_MM), (3 * n_u // 4, VENT_MM)):
         outer = outer - _channel(ring[k], hi[2], diameter, frame)
     parts = _outer_parts(outer, to_trimesh(filled), frame, lo, hi) | {"mould_core": filled - cushion_m}
-    parts = {name: _clean_as_written(part) for name, part in parts.items()}
+    parts = {name: clean_as_written(part) for name, part in parts.items()}
     return Mould(parts, demoulding(parts, solid, side, axis))
 
 
@@ -131,33 +126,6 @@ def _touching_most(piece: trimesh.Trimesh, others: dict) -> str | None:
     touching = {name: contains_points(mesh.ray, probe, check_direction=PROBE_RAYS[0]).sum() for name, mesh in others.items()}
     best = max(touching, key=touching.get)
     return best if touching[best] else None
-
-
-def _clean_as_written(part: m3.Manifold) -> trimesh.Trimesh:
-    """A part made clean as its float32 file reads back (`files.check_file`): `_welded`, and again
-    while the file would still hold a triangle under ZERO_AREA_MM2 (a weld's output rounded to
-    float32 can leave two vertices one float32 step apart) or two sheets touching along an edge
-    (an edge of the file in four triangles: a bar PINCH_MM across is cut out along it first), at
-    most CLEAN_PASSES times; what is left the check at writing refuses."""
-    welded = _welded(part)
-    corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    for _ in range(CLEAN_PASSES):
-        written = as_written(to_trimesh(welded))
-        pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
-        if not len(pinches) and written.area_faces.min() >= ZERO_AREA_MM2:
-            break
-        for ends in pinches:
-            welded = welded - m3.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
-        welded = _welded(welded)
-    return to_trimesh(welded)
-
-
-def _welded(part: m3.Manifold) -> m3.Manifold:
-    """A part with its vertices rounded to float32, as its file holds them, and those then within
-    WELD_MM (those that coincide) merged (manifold3d), dropping the slivers this parts from it
-    (under SLIVER_MM3)."""
-    welded = to_manifold(to_trimesh(part)).simplify(WELD_MM)
-    return m3.Manifold.compose([body for body in welded.decompose() if body.volume() >= SLIVER_MM3])
 
 
 def _to_scan(frame: np.ndarray) -> np.ndarray:
