@@ -4,7 +4,8 @@ a design, with the seal where the original orientation puts it.
 Each case: the scan (default the shared fran.obj) turned by `Rotation.random(i)`, moved by up to
 ~0.3 m, written in m, mm or cm as OBJ (with its texture), PLY or STL (no texture), then
 `pipeline.design`. Printed: the seal curve's distance to the original's (turned back, mm), the rim
-gap, leak and safe window.
+gap, leak and safe window, and the headgear force set and the awake peak pressure against the
+original's (how much the fit's figures move when only the scan's pose, unit or format changes).
 
 Usage: .venv/bin/python bench/orientation.py [--cases 9] [--mask nasal] [--scan FILE]
 (the default scan needs ../shared)
@@ -36,11 +37,13 @@ def main() -> None:
     ap.add_argument("--scan", type=Path, default=FRAN, help="a mesh scan (units decided from its size)")
     args = ap.parse_args()
     original = load_scan(args.scan)
-    reference = design(original, args.mask).contact.curve
+    first = design(original, args.mask)
+    reference, force, peak = first.contact.curve, first.fits["custom"].force_n, first.fits["custom"].summary()["pressure_max_kpa"]
+    print(f"original: headgear force {force:.2f} N, awake peak {peak:.2f} kPa")
     mesh = trimesh.load(args.scan, force="mesh", process=False)
     mesh.vertices = mesh.vertices * (MM_PER_UNIT[original.units] / 1000.0)  # metres
-    print("| case | unit | format | seal vs original: mean | max (mm) | rim gap max (mm) | leak (L/min) | window |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| case | unit | format | seal vs original: mean | max (mm) | rim gap max (mm) | leak (L/min) | window | headgear force (N) | awake peak (kPa) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for i in range(args.cases):
         turn = Rotation.random(random_state=i).as_matrix()
         shift = np.random.default_rng(i).normal(0.0, 0.3, 3)  # metres
@@ -57,9 +60,11 @@ def main() -> None:
                 continue
         back = (d.contact.curve / 1000.0 - shift) @ turn * 1000.0  # the design is in mm in the file's frame
         apart = cKDTree(back).query(reference)[0]
-        fit = d.fits["custom"].summary()
+        custom = d.fits["custom"]
+        fit = custom.summary()
         print(f"| {i} | {unit} | {suffix} | {apart.mean():.2f} | {apart.max():.2f} | {d.rim.summary()['rim_gap_max_mm']:.2f} | "
-              f"{fit['leak_l_min']:.2f} | {fit['window_fraction']:.2f} |", flush=True)
+              f"{fit['leak_l_min']:.2f} | {fit['window_fraction']:.2f} | {custom.force_n:.2f} ({custom.force_n / force - 1:+.0%}) | "
+              f"{fit['pressure_max_kpa']:.2f} ({fit['pressure_max_kpa'] / peak - 1:+.0%}) |", flush=True)
 
 
 if __name__ == "__main__":
