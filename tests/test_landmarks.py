@@ -331,11 +331,13 @@ def test_two_faces_are_refused(tmp_path):
         initial_alignment(load_scan(tmp_path), TEMPLATE)
 
 
-@pytest.mark.parametrize("turn,refused", [(2, False), (0, True)], ids=["upside-down", "upright"])
-def test_a_second_face_counts_only_where_the_face_is_found(phantom1_dir, monkeypatch, turn, refused):
-    """MediaPipe sometimes sees a second, phantom face in a face turned upside down (a real face
-    scan rendered from above). A second face beside the first in the image turned by 180 degrees
-    is not a second patient; beside the face found upright, it is."""
+@pytest.mark.parametrize("turn", [2, 0], ids=["upside-down", "upright"])
+def test_a_second_face_on_the_same_head_is_not_a_second_patient(phantom1_dir, monkeypatch, turn):
+    """MediaPipe sometimes sees a second, phantom face: in a face turned upside down (a real face
+    scan rendered from above), in a noisy scan's shading. One reported 0.7 face widths beside the
+    face in the image, upright or turned by 180 degrees, places the template on the same head (not
+    TWO_FACES_MM from the face's): not a second patient, and the face is found (two patients side
+    by side are refused, `test_two_faces_are_refused`)."""
     from cpapfit.landmarks import detect
 
     def with_a_second_face(image, turns=(0, 1, 2, 3)):
@@ -344,11 +346,8 @@ def test_a_second_face_counts_only_where_the_face_is_found(phantom1_dir, monkeyp
 
     detect_rotations = detect.detect_rotations
     monkeypatch.setattr(detect, "detect_rotations", with_a_second_face)
-    if refused:
-        with pytest.raises(InputError, match="two faces"):
-            initial_alignment(load_scan(phantom1_dir), TEMPLATE)
-    else:
-        assert initial_alignment(load_scan(phantom1_dir), TEMPLATE)[0].path == "image"
+    landmarks, fit, _ = initial_alignment(load_scan(phantom1_dir), TEMPLATE)
+    assert landmarks.path == "image" and len(landmarks.template_index) >= 300
 
 
 def test_window_median_and_percentiles_equal_numpys_to_the_bit():

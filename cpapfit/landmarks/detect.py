@@ -25,7 +25,7 @@ from .lift import lift
 from .mouth import lips_apart_mm
 from .types import Landmarks
 from .views import axis_views, face_view, render_view
-from ..thresholds import MIN_LANDMARKS, MIN_INLIERS, TWO_FACES_APART
+from ..thresholds import MIN_LANDMARKS, MIN_INLIERS, TWO_FACES_MM
 
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
 FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
@@ -103,27 +103,30 @@ def _as_found_by(det: Detection, path: str) -> Detection:
 def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True, turns: tuple[int, ...] = (0, 1, 2, 3)) -> Detection | None:
     """The detection with the least similarity RMS over the sights and image rotations (k * 90 deg,
     k in `turns`), or None. `one_face`: refuse when the sight and rotation of that detection show two
-    faces (only there: in a face turned upside down MediaPipe can see a second, phantom face; a
-    frontal render frames one face only: skipped)."""
+    faces that lift onto the depth as two heads (`_refuse_two_faces`; only there: in a face turned
+    upside down MediaPipe can see a second, phantom face; a frontal render frames one face only:
+    skipped)."""
     best, crowd = None, None
     normals = template.mesh().vertex_normals[:N_LANDMARKS]
     for sight in seen:
         for k, faces in detect_rotations(sight.image, turns):
-            for uv in faces:
-                det = _evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg")
-                if det is not None and (best is None or det.similarity.rms_mm < best.similarity.rms_mm):
-                    best, crowd = det, (faces, sight)
+            found = [_evaluate(sight, uv[:N_LANDMARKS], template, normals, f"{path}: {sight.label}, rotation {90 * k} deg") for uv in faces]
+            found = [det for det in found if det is not None]
+            for det in found:
+                if best is None or det.similarity.rms_mm < best.similarity.rms_mm:
+                    best, crowd = det, (found, sight)
     if one_face and crowd is not None:
-        _refuse_two_faces(*crowd)
+        _refuse_two_faces(*crowd, template)
     return best
 
 
-def _refuse_two_faces(faces: list[np.ndarray], sight: Sight) -> None:
-    if len(faces) < 2:
-        return
-    centres = [f.mean(axis=0) for f in faces]
-    size = max(np.ptp(f, axis=0).max() for f in faces)
-    if np.linalg.norm(centres[0] - centres[1]) > TWO_FACES_APART * size:
+def _refuse_two_faces(found: list[Detection], sight: Sight, template: Template) -> None:
+    """InputError where two of the detections `found` in one sight place the template's landmarks
+    (their mean) more than TWO_FACES_MM apart: two heads. Closer, they are one head read twice (a
+    noisy scan's shading seen from below gave two faces 56-92 mm apart; two patients side by side
+    in one capture, 217 mm)."""
+    centres = np.array([det.similarity.apply(template.landmarks).mean(axis=0) for det in found])
+    if len(centres) > 1 and np.linalg.norm(centres[:, None] - centres[None], axis=2).max() > TWO_FACES_MM:
         raise InputError(f"two faces in the {sight.label}: scan one patient at a time (crop or rescan)")
 
 
