@@ -1,7 +1,7 @@
 """Where a cushion meets the face: its contact line, found from the cushion's own mesh.
 
 The cushion (any triangle mesh in the scan frame: the designed solid, an STL from elsewhere, a
-stock cushion) is refined to ~1 mm edges; every vertex of its wall near the face end (at most
+stock cushion) is refined to 0.7 mm edges (REFINE_MM); every vertex of its wall near the face end (at most
 RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin.
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
