@@ -63,8 +63,8 @@ def main() -> None:
         custom = d.fits["custom"]
         fit = custom.summary()
         print(f"| {i} | {unit} | {suffix} | {apart.mean():.2f} | {apart.max():.2f} | {d.rim.summary()['rim_gap_max_mm']:.2f} | "
-              f"{fit['leak_l_min']:.2f} | {fit['window_fraction']:.2f} | {custom.force_n:.2f} ({custom.force_n / force - 1:+.0%}) | "
-              f"{fit['pressure_max_kpa']:.2f} ({fit['pressure_max_kpa'] / peak - 1:+.0%}) |", flush=True)
+              f"{fit['leak_l_min']:.2f} | {fit['window_fraction']:.2f} | {custom.force_n:.2f} ({custom.force_n / force - 1:+.1%}) | "
+              f"{fit['pressure_max_kpa']:.2f} ({fit['pressure_max_kpa'] / peak - 1:+.1%}) |", flush=True)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from cpapfit.render import Scene
 from cpapfit.landmarks.cloud import facing_surface
 from cpapfit.align.fallback import fallback_alignment, thinned
 from cpapfit.landmarks.lift import row_median, row_percentile
+from cpapfit.thresholds import TWO_FACES_MM
 from cpapfit.synthetic.accuracy import surface_distance
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.synthetic.camera import KINECT_V1
@@ -344,10 +345,17 @@ def test_a_second_face_on_the_same_head_is_not_a_second_patient(phantom1_dir, mo
         found = detect_rotations(image, turns)
         return [(k, faces + [faces[0] + [0.7 * np.ptp(faces[0][:, 0]), 0.0]] if k == turn and faces else faces) for k, faces in found]
 
-    detect_rotations = detect.detect_rotations
+    def judged(found, sight, template):
+        apart.append(np.linalg.norm(np.subtract(*[det.similarity.apply(template.landmarks).mean(axis=0) for det in found[:2]])))
+        return refuse(found, sight, template)
+
+    detect_rotations, refuse, apart = detect.detect_rotations, detect._refuse_two_faces, []
     monkeypatch.setattr(detect, "detect_rotations", with_a_second_face)
+    monkeypatch.setattr(detect, "_refuse_two_faces", lambda found, sight, template: len(found) < 2 or judged(found, sight, template))
     landmarks, fit, _ = initial_alignment(load_scan(phantom1_dir), TEMPLATE)
     assert landmarks.path == "image" and len(landmarks.template_index) >= 300
+    if turn == 0:  # the second face is where the face is found: both lift onto the depth, on one head
+        assert apart and max(apart) < TWO_FACES_MM
 
 
 def test_window_median_and_percentiles_equal_numpys_to_the_bit():

@@ -55,7 +55,7 @@ def test_a_vertex_rounding_onto_its_neighbour_leaves_zero_area_triangles():
 def test_designed_files_are_clean_as_written(designed):
     """Every part of a design, as its STL (and the cushion's 3MF) reads back: no vertex merged away, closed."""
     _, d = designed
-    for name, part in {"cushion": d.solid, **d.mould_parts}.items():
+    for name, part in {"cushion": d.solid, "frame": d.frame.mesh, **d.mould_parts}.items():
         back = read_stl(checked_files(part, name)[f"{name}.stl"])
         assert len(back.faces) == len(part.faces) and len(back.vertices) == len(part.vertices), name
     threemf = checked_files(d.solid, "cushion", ("3mf",))["cushion.3mf"]
@@ -64,7 +64,7 @@ def test_designed_files_are_clean_as_written(designed):
 
 def test_sheets_touching_along_an_edge_are_parted_before_writing():
     """Two cubes sharing an edge: one manifold3d solid, but the edge is in four triangles as written;
-    the mould's clean-up cuts them apart there, losing a negligible volume."""
+    `clean_as_written` cuts them apart there, losing a negligible volume."""
     import manifold3d
 
     from cpapfit.fabrication.files import clean_as_written

@@ -107,32 +107,37 @@ def unpaired_edges(mesh: trimesh.Trimesh) -> np.ndarray:
 
 
 def written_clean(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """`mesh` where its file reads back as a clean closed 2-manifold (`check_file`), else
-    `clean_as_written`: far from the origin float32 corners merge vertices that a boolean left
-    microns apart (a scan 2 m from its origin)."""
-    back = as_written(mesh)
-    if not len(unpaired_edges(back)) and back.area_faces.min() >= ZERO_AREA_MM2:
+    """`mesh` where its file reads back with no unpaired edge and no triangle under ZERO_AREA_MM2
+    (`_reads_back_clean`), or where it is no valid closed solid (the checks at writing refuse it
+    with its measured values); else `clean_as_written`: far from the origin float32 corners merge
+    vertices that a boolean left microns apart (a scan 2 m from its origin)."""
+    if _reads_back_clean(as_written(mesh)):
         return mesh
-    return clean_as_written(to_manifold(mesh))
+    solid = to_manifold(mesh)
+    return clean_as_written(solid) if mesh.is_watertight and solid.status() == manifold3d.Error.NoError else mesh
 
 
 def clean_as_written(part: manifold3d.Manifold) -> trimesh.Trimesh:
-    """A part made clean as its float32 file reads back (`files.check_file`): `_welded`, and again
-    while the file would still hold a triangle under ZERO_AREA_MM2 (a weld's output rounded to
-    float32 can leave two vertices one float32 step apart) or two sheets touching along an edge
-    (an edge of the file in four triangles: a bar PINCH_MM across is cut out along it first), at
-    most CLEAN_PASSES times; what is left the check at writing refuses."""
+    """A part made clean as its float32 file reads back (`check_file`): `_welded`, and again while
+    the file would still hold a triangle under ZERO_AREA_MM2 (a weld's output rounded to float32
+    can leave two vertices one float32 step apart) or two sheets touching along an edge (an edge
+    of the file in four triangles: a bar PINCH_MM across is cut out along it first), at most
+    CLEAN_PASSES times; what is left the check at writing refuses."""
     welded = _welded(part)
     corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
     for _ in range(CLEAN_PASSES):
         written = as_written(to_trimesh(welded))
-        pinches = written.vertices[unpaired_edges(written)]  # (K, 2, 3)
-        if not len(pinches) and written.area_faces.min() >= ZERO_AREA_MM2:
+        if _reads_back_clean(written):
             break
-        for ends in pinches:
+        for ends in written.vertices[unpaired_edges(written)]:  # (2, 3) each
             welded = welded - manifold3d.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
         welded = _welded(welded)
     return to_trimesh(welded)
+
+
+def _reads_back_clean(written: trimesh.Trimesh) -> bool:
+    """A mesh as read back from its file has every edge in two triangles and none under ZERO_AREA_MM2."""
+    return not len(unpaired_edges(written)) and written.area_faces.min(initial=np.inf) >= ZERO_AREA_MM2
 
 
 def _welded(part: manifold3d.Manifold) -> manifold3d.Manifold:
