@@ -30,7 +30,7 @@ from ..thresholds import MIN_COVERED
 from .mechanics import COS_MIN
 
 SECTORS = 256
-REFINE_MM = 0.7  # longest cushion edge after refinement (at 1.0 mm, a cushion moved 0.1 mm read a 9 % other force: bench/rim_stability.py)
+REFINE_MM = 0.7  # longest cushion edge after refinement (at 1.0 mm a cushion moved 0.1 mm read its force 9 % apart: bench/rim_stability.py)
 REACH_MM = 60.0  # rays look this far up (rims pressed into the skin) and down the axis for the skin
 CLOUD_RADIUS_MM = 2.0  # a ray "hits" a point cloud's points this close to it
 CLOUD_LAYER_MM = 3.0  # deeper than this below the topmost of them: another surface
