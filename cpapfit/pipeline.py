@@ -41,7 +41,7 @@ from .template import load_template, mask_region
 from .work import ahead, at_once
 
 SURFACE_REACH_MM = 30.0  # the scan kept for pressing cushions: this near the seal bands, for any size, pushed or rolled
-SURFACE_CUBE_MM = 0.5  # that scan, a mesh denser than this (median edge), vertex-clustered in cubes this size (rims are read at 1 mm)
+SURFACE_CUBE_MM = 0.5  # that scan, a mesh denser than this (median edge), vertex-clustered in cubes this size (finer than rims are read)
 
 
 @dataclass(frozen=True)

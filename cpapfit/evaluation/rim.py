@@ -246,7 +246,8 @@ def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
 
 def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:
     """The likely reason a rim finds no skin under it, in words."""
-    return (isinstance(scan, trimesh.PointCloud) and _too_sparse(np.asarray(scan.vertices))) or "is the cushion in this scan's frame, in mm?"
+    why = _too_sparse(np.asarray(scan.vertices)) if isinstance(scan, trimesh.PointCloud) else ""
+    return why or "is the cushion in this scan's frame, in mm?"
 
 
 def _too_sparse(cloud: np.ndarray) -> str:
