@@ -10,14 +10,16 @@ from cpapfit.errors import QualityError
 from cpapfit.io.capture import load_capture
 from cpapfit.io.landmarks import landmarks_record, read_landmarks
 from cpapfit.io.phantom import write_phantom
-from cpapfit.landmarks.mouth import _gap_in_depth
+from cpapfit.landmarks.mouth import _gaps_in_depth, lips_apart_mm
 from cpapfit.landmarks.types import Landmarks
 from cpapfit.synthetic.template_phantom import make_phantom
+from cpapfit.synthetic.ict_phantom import make_ict_phantom
 from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align, assessed, design, place_template
 from cpapfit.quality.gates import _mouth_gates
 from cpapfit.thresholds import QualityParams
 from cpapfit.scan import Intrinsics, Scan
+from cpapfit.similarity import Similarity
 from cpapfit.template import load_template
 
 SEED = 101
@@ -91,28 +93,71 @@ def test_a_mesh_with_an_open_mouth_is_refused_too(closed_and_open):
         design(mesh, "oronasal")
 
 
+CAMERA = Intrinsics(100, 100, 600.0, 600.0, 50.0, 50.0)
+PX_MM = 500.0 / 600.0  # one pixel's length at 500 mm
+
+
+def test_an_ict_face_showing_its_teeth_is_flagged(tmp_path):
+    """An ICT face (teeth, gums and tongue behind its lips; not the template), lower lip dropped
+    12 mm, the inner lips ~14 mm apart: read over the flag (Face Mesh alone takes the teeth for lips
+    and reads 4.5-11.7 mm on such faces); closed, under 3 mm."""
+    read = []
+    for mm in (0.0, 12.0):
+        write_phantom(make_ict_phantom(7101, mouth_open_mm=mm), tmp_path / f"{mm:g}")
+        read.append(align(load_capture(tmp_path / f"{mm:g}")).landmarks.lips_apart_mm)
+    assert read[0] < 3.0 and read[1] > QualityParams().lips_apart_flag_mm
+
+
 def test_the_gap_along_a_sloped_segment_between_ends_at_different_depths():
     """Depth rising 500 -> 540 mm down the image, no depth over rows 40-47: a diagonal segment crosses
     8 rows there, 8 sqrt(2) px, at ~519 mm: 9.8 mm, to within a pixel's length."""
-    intrinsics = Intrinsics(100, 100, 600.0, 600.0, 50.0, 50.0)
     rows = np.arange(100, dtype=float)[:, None]
     depth = np.broadcast_to(500.0 + 0.5 * (rows - 10.0), (100, 100)).copy()
     depth[40:48, :] = np.nan
-    gap = _gap_in_depth(np.array([[10.0, 10.0], [90.0, 90.0]]), np.array([500.0, 540.0]), depth, intrinsics)
-    assert gap == pytest.approx(8 * np.sqrt(2.0) * 519.0 / 600.0, abs=np.sqrt(2.0) * 519.0 / 600.0)
+    anywhere, seen = _gaps_in_depth(np.array([[10.0, 10.0], [90.0, 90.0]]), np.array([500.0, 540.0]), depth, CAMERA)
+    assert anywhere == pytest.approx(8 * np.sqrt(2.0) * 519.0 / 600.0, abs=np.sqrt(2.0) * 519.0 / 600.0)
+    assert seen == 0.0  # a hole, not the inside of a mouth
 
 
 @pytest.mark.parametrize("skin, rows, expected_px", [
-    (np.nan, (40, 48), 8), (520.0, (30, 50), 20), (503.0, (30, 50), 0), (500.0, (30, 50), 0),
+    (np.nan, (40, 48), (8, 0)), (520.0, (30, 50), (20, 20)), (508.0, (30, 50), (20, 20)), (503.0, (30, 50), (0, 0)),
+    (500.0, (30, 50), (0, 0)),
 ])
 def test_the_gap_in_the_depth_is_the_longest_run_without_skin(skin, rows, expected_px):
-    """Lips at 500 mm, a run of rows with no depth, depth 20 mm behind (the inside of the mouth), or
-    3 mm behind (still the lips): the run's length in mm is its pixels at 500 mm, to within a pixel."""
-    intrinsics = Intrinsics(100, 100, 600.0, 600.0, 50.0, 50.0)
+    """Lips at 500 mm, a run of rows with no depth (a hole: not seen), depth 20 or 8 mm behind (the
+    inside of the mouth, its teeth: seen), or 3 mm behind (still the lips): each run's length in mm
+    is its pixels at 500 mm, to within a pixel."""
     depth = np.full((100, 100), 500.0)
     depth[rows[0]:rows[1], :] = skin
-    gap = _gap_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, intrinsics)
-    assert gap == pytest.approx(expected_px * 500.0 / 600.0, abs=500.0 / 600.0)
+    gaps = _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
+    assert gaps == pytest.approx(np.multiply(expected_px, PX_MM), abs=PX_MM)
+
+
+def test_lips_whose_fitted_depth_is_off_are_read_from_the_depth_at_their_ends():
+    """The fitted template's lips 12 mm in front of the scan (a face seen from the side): the lips'
+    own depth, 12 mm behind the template's line, is not read as an open mouth; a mouth 15 mm further
+    behind still is."""
+    depth = np.full((100, 100), 512.0)
+    gaps = _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
+    assert gaps == (0.0, 0.0)
+    depth[30:50, :] = 527.0
+    assert _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)[1] == pytest.approx(
+        20 * PX_MM, abs=PX_MM)
+
+
+@pytest.mark.parametrize("inside, expected_px", [(510.0, 20), (np.nan, 2)])
+def test_teeth_behind_the_lips_outvote_face_mesh_and_a_hole_does_not(inside, expected_px):
+    """Face Mesh's inner lips 2 px apart (teeth taken for lips) over a mouth 20 px open down the
+    middle: teeth 10 mm behind the lips read the 20 px; the same run without depth (a hole) keeps
+    the smaller reading, Face Mesh's."""
+    template_landmarks = np.zeros((468, 3))
+    template_landmarks[[0, 13, 14, 17], 1] = [-20.0, -1.0, 1.0, 20.0]  # mm: 10 px at 500 mm per 8.3 mm
+    depth = np.full((100, 100), 500.0)
+    depth[40:60, :] = inside
+    uv = np.full((468, 2), 50.0)
+    uv[[0, 13, 14, 17], 1] = [26.0, 49.0, 51.0, 74.0]
+    fit = Similarity(1.0, np.eye(3), np.array([0.0, 0.0, 500.0]), np.ones(468), 0.0, 1)
+    assert lips_apart_mm(uv, fit, template_landmarks, depth, CAMERA) == pytest.approx(expected_px * PX_MM, abs=PX_MM)
 
 
 @pytest.mark.parametrize("mm, mask, expected", [

@@ -1,16 +1,22 @@
-"""How far apart the lips are, in mm, read twice from a detection and the depth under it.
+"""How far apart the lips are, in mm, read from a detection and the depth under it.
 
 An open mouth drops the jaw, and the template's closed mouth does not follow it: the oronasal
-seal's chin part then lands millimetres from its place (see `quality`). Two readings, the smaller
-kept, as each over-reads in its own way:
+seal's chin part then lands millimetres from its place (see `quality`). Two readings, each wrong
+in its own way:
 - Face Mesh's inner lips (13 upper, 14 lower): over an open mouth the depth has no skin, so each
   is taken to the depth of the fitted template's lip there. MediaPipe over-reads a mouth whose lips
   a render or a colour image shows with a gap of background between them (a mesh with holes along
-  the lips' crease reads 5-18 mm closed);
+  the lips' crease reads 5-18 mm closed), and under-reads a mouth showing its teeth (it takes them
+  for lips: 4.5-11.7 mm on ICT faces whose inner lips are 14 mm apart);
 - the depth down the middle of the lips, from the top of the upper lip (landmark 0) to the bottom
-  of the lower (17): the longest run with no skin (no depth, or over MOUTH_DEPTH_MM behind the
-  lips). Holes in the scan there over-read it; teeth or tongue within MOUTH_DEPTH_MM of the lips'
-  line under-read a slight opening (not tried on real faces).
+  of the lower (17): the longest run with no skin, i.e. no depth or depth over MOUTH_DEPTH_MM behind
+  the lips' line. That line is taken twice, through the fitted template's lips and through the
+  scan's own depth at the two ends, and a point is behind only if behind both (a face seen from the
+  side misplaces either). A run mostly of seen surface is the inside of the mouth (teeth, tongue);
+  a run mostly without depth may be a hole in the scan, which over-reads.
+
+The reading is the smaller of the two, or the run of seen surface if longer: holes over-read
+either reading, but only an open mouth shows surface behind the lips.
 """
 
 import numpy as np
@@ -27,17 +33,20 @@ STEP_PX = 0.5
 
 def lips_apart_mm(uv: np.ndarray, fit: Similarity, template_landmarks: np.ndarray, depth_mm: np.ndarray,
                   intrinsics: Intrinsics) -> float:
-    """The smaller of the two readings (mm) for a detection: (468, 2) pixels `uv` in the image of the
-    camera `intrinsics`, the similarity `fit` (template -> that camera, mm) of the (468, 3) mm
+    """The reading (mm) for a detection: (468, 2) pixels `uv` in the image of the camera
+    `intrinsics`, the similarity `fit` (template -> that camera, mm) of the (468, 3) mm
     `template_landmarks`, and the (H, W) camera depth (mm, NaN where none)."""
     lips = fit.apply(template_landmarks[[UPPER_INNER, LOWER_INNER, UPPER_OUTER, LOWER_OUTER]])
     inner = np.linalg.norm(np.subtract(*backproject_pixels(uv[[UPPER_INNER, LOWER_INNER]], lips[:2, 2], intrinsics)))
-    return float(min(inner, _gap_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)))
+    anywhere, seen = _gaps_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)
+    return float(max(min(inner, anywhere), seen))
 
 
-def _gap_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics) -> float:
-    """Length (mm) of the longest run without skin along the pixel segment `ends` (2, 2), whose ends
-    lie at depths `z` (2,) mm: depth missing there, or over MOUTH_DEPTH_MM behind the segment."""
+def _gaps_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics) -> tuple[float, float]:
+    """Lengths (mm) of the longest run without skin along the pixel segment `ends` (2, 2), whose ends
+    lie at depths `z` (2,) mm, and of the longest such run mostly of seen surface (teeth, tongue):
+    without skin is depth missing, or over MOUTH_DEPTH_MM behind both the line between `z` and the
+    line between the depths seen at the ends (where seen)."""
     count = max(2, int(np.ceil(np.linalg.norm(ends[1] - ends[0]) / STEP_PX)) + 1)
     t = np.linspace(0.0, 1.0, count)
     uv = ends[0] + t[:, None] * (ends[1] - ends[0])
@@ -46,15 +55,21 @@ def _gap_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrins
     inside = (pixel >= 0).all(axis=1) & (pixel < [w, h]).all(axis=1)
     col, row = np.clip(pixel, 0, [w - 1, h - 1]).T
     expected = z[0] + t * (z[1] - z[0])
+    at_ends = np.array([_depth_near(depth_mm, r, c, fallback) for r, c, fallback in zip(row[[0, -1]], col[[0, -1]], z)])
+    lip_line = np.maximum(expected, at_ends[0] + t * (at_ends[1] - at_ends[0]))
     seen = depth_mm[row, col]
-    open_ = inside & ~(seen <= expected + MOUTH_DEPTH_MM)  # NaN (no depth) counts as open; off the image, unknown
-    if not open_.any():
-        return 0.0
+    open_ = inside & ~(seen <= lip_line + MOUTH_DEPTH_MM)  # NaN (no depth) counts as open; off the image, unknown
     edges = np.flatnonzero(np.diff(np.concatenate([[0], open_.astype(np.int8), [0]])))
-    starts, stops = edges[::2], edges[1::2] - 1
-    k = int(np.argmax(stops - starts))
-    a, b = backproject_pixels(uv[[starts[k], stops[k]]], expected[[starts[k], stops[k]]], intrinsics)
-    return float(np.linalg.norm(a - b))
+    runs = list(zip(edges[::2], edges[1::2] - 1))
+    length = [float(np.linalg.norm(np.subtract(*backproject_pixels(uv[[a, b]], expected[[a, b]], intrinsics)))) for a, b in runs]
+    mostly_seen = [2 * np.isfinite(seen[a:b + 1]).sum() >= b + 1 - a for a, b in runs]
+    return max(length, default=0.0), max((n for n, m in zip(length, mostly_seen) if m), default=0.0)
+
+
+def _depth_near(depth_mm: np.ndarray, row: int, col: int, fallback: float, half: int = 2) -> float:
+    """Median depth (mm) of the (2 half + 1)^2 pixels about (row, col), or `fallback` if none has depth."""
+    patch = depth_mm[max(row - half, 0):row + half + 1, max(col - half, 0):col + half + 1]
+    return float(np.nanmedian(patch)) if np.isfinite(patch).any() else float(fallback)
 
 
 def lips_apart_in_points(points: np.ndarray, template_index: np.ndarray) -> float:
