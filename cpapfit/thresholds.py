@@ -38,6 +38,7 @@ MIN_DETECTION_CONFIDENCE = 0.5  # MediaPipe's face detection
 MIN_LANDMARKS = 30  # fewer lifted landmarks than this is no detection
 MIN_INLIERS = 60  # a detection must have this many landmarks agreeing with the similarity
 TWO_FACES_MM = 120.0  # two detections placing the face this far apart (mm) are two heads (a head is ~150 mm wide)
+BLUE_SKIN_TINT = -0.05  # a detected face whose median (R - B) / (R + G + B) is below this is blue: channels swapped
 LIFT_MIN_VALID_FRACTION = 0.4  # a landmark is lifted to 3-D from a depth window with at least this share valid
 LIFT_MAX_SPREAD_MM = 6.0  # a window straddling a depth edge (spread of valid depths) is not trusted
 

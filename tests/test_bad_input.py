@@ -234,6 +234,12 @@ def _(d, s):
     return [d], ["face_size", "intrinsics (fx, fy)"]
 
 
+@case("colour with its channels in BGR order")
+def _(d, s):
+    save_png(capture(d, s) / "color.png", s.ph.image[..., ::-1])
+    return [d], ["blue", "BGR"]
+
+
 @case("depth and colour of different sizes")
 def _(d, s):
     save_png(capture(d, s) / "color.png", s.ph.image[::2, ::2])

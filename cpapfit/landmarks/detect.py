@@ -25,7 +25,7 @@ from .lift import lift
 from .mouth import lips_apart_mm
 from .types import Landmarks
 from .views import axis_views, face_view, render_view
-from ..thresholds import MIN_LANDMARKS, MIN_INLIERS, TWO_FACES_MM
+from ..thresholds import BLUE_SKIN_TINT, MIN_LANDMARKS, MIN_INLIERS, TWO_FACES_MM
 
 FACING_COS = 0.15  # a landmark whose template normal is turned further from the camera is hidden
 FRONTAL_PASSES = 3  # renders from in front of the face found, each from the last one's face (3: the view settles)
@@ -130,6 +130,19 @@ def _refuse_two_faces(found: list[Detection], sight: Sight, template: Template) 
         raise InputError(f"two faces in the {sight.label}: scan one patient at a time (crop or rescan)")
 
 
+def _refuse_blue_skin(sight: Sight, uv: np.ndarray) -> None:
+    """InputError where the face at the (K, 2) pixels `uv` of the sight's image is blue, not red:
+    median (R - B) / (R + G + B) under BLUE_SKIN_TINT (skin reads +0.09 to +0.49 over the shared real
+    scans and the synthetic skin tones; the TrueDepth frame with its channels swapped, -0.40 to -0.48)."""
+    h, w = sight.image.shape[:2]
+    col, row = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1]).T
+    rgb = sight.image[row, col, :3].astype(float)
+    tint = float(np.median((rgb[:, 0] - rgb[:, 2]) / np.maximum(rgb.sum(axis=1), 1.0)))
+    if tint < BLUE_SKIN_TINT:
+        raise InputError(f"the face in the {sight.label} is blue, not skin-coloured (red minus blue {tint:+.2f} of the "
+                         "brightness): are its colour channels in BGR order? write the colour as RGB")
+
+
 def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndarray, note: str) -> Detection | None:
     """Lift one detection, fit the template to it, drop hidden landmarks, refit; None if implausible."""
     cam, ok = lift(uv, sight.depth, sight.intrinsics)
@@ -147,6 +160,7 @@ def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndar
     inliers = int((fit.weights > 0.5).sum())
     if inliers < MIN_INLIERS:
         return None
+    _refuse_blue_skin(sight, uv)
     # The similarity was fitted in camera coordinates; carry it and the points to the scan frame.
     points = sight.to_scan(cam[index])
     origin = sight.to_scan(np.zeros((1, 3)))[0]
