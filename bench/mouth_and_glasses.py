@@ -6,7 +6,7 @@ registered mask region against the truth (mm), the seal curve's largest distance
 each capture is made a mesh scan turned at random, coloured or bare (landmarks from renders).
 With --population ict the subjects are ICT faces (teeth, gums and tongue behind the lips, the
 model's own jawOpen), as `cpapfit phantom --seed S --mouth-open MM` writes them: captures, or with
---mesh (any value) the whole head mesh of `--mesh`.
+--mesh colour the whole coloured head mesh (template frame, not turned), as `--mesh` writes it.
 
 Usage: .venv/bin/python bench/mouth_and_glasses.py [--seeds 6] [--first 100] [--mm 0,2,4,8] [--glasses]
        [--mask oronasal] [--mesh colour|bare] [--population template|ict]
@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from cpapfit.errors import CpapfitError
 from cpapfit.io import load_scan
 from cpapfit.io.capture import load_capture
-from cpapfit.io.phantom import write_head_mesh, write_phantom
+from cpapfit.io.phantom import HEAD, write_head_mesh, write_phantom
 from cpapfit.synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.synthetic.camera import FRAMED
@@ -51,7 +51,7 @@ def ict_subject(seed: int, mm: float, mesh: bool):
         if mesh:
             head = ict_head_mesh(seed, mouth_open_mm=mm)
             write_head_mesh(head, Path(tmp))
-            return load_scan(Path(tmp) / "head.ply"), head.truth
+            return load_scan(Path(tmp) / HEAD), head.truth
         ph = make_ict_phantom(seed, mouth_open_mm=mm)
         write_phantom(ph, Path(tmp))
         return load_capture(Path(tmp)), ph.surface
@@ -82,6 +82,8 @@ def main() -> None:
     ap.add_argument("--mesh", choices=("colour", "bare"), default=None, help="as a mesh scan, turned at random")
     ap.add_argument("--population", choices=("template", "ict"), default="template")
     args = ap.parse_args()
+    if args.population == "ict" and (args.glasses or args.mesh == "bare"):
+        ap.error("--population ict: no glasses, and its head meshes are coloured (--mesh colour)")
     kind = f"as {args.mesh} meshes" if args.mesh else "as captures"
     worn = ", wearing glasses" if args.glasses else ""
     who = "ICT subjects" if args.population == "ict" else "framed subjects"

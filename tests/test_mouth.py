@@ -97,7 +97,7 @@ CAMERA = Intrinsics(100, 100, 600.0, 600.0, 50.0, 50.0)
 PX_MM = 500.0 / 600.0  # one pixel's length at 500 mm
 
 
-def test_an_ict_face_showing_its_teeth_is_flagged(tmp_path):
+def test_an_ict_face_showing_its_teeth_reads_over_the_flag(tmp_path):
     """An ICT face (teeth, gums and tongue behind its lips; not the template), lower lip dropped
     12 mm, the inner lips ~14 mm apart: read over the flag (Face Mesh alone takes the teeth for lips
     and reads 4.5-11.7 mm on such faces); closed, under 3 mm."""
@@ -143,6 +143,41 @@ def test_lips_whose_fitted_depth_is_off_are_read_from_the_depth_at_their_ends():
     depth[30:50, :] = 527.0
     assert _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)[1] == pytest.approx(
         20 * PX_MM, abs=PX_MM)
+
+
+@pytest.mark.parametrize("ends, inside, expected_px", [
+    (488.0, 496.0, 0),  # the fitted lips 12 mm behind the scan's: 8 mm behind those is still lips
+    (np.nan, 520.0, 20),  # no depth at the ends: the fitted lips' line
+    (1500.0, 520.0, 20),  # the background at the ends (a profile's edge): the fitted lips' line
+])
+def test_the_lips_line_is_behind_both_the_fitted_and_the_seen_lips(ends, inside, expected_px):
+    """Fitted lips at 500 mm, a mouth over rows 30-49: where the scan's lips are nearer than the
+    fitted ones, a point must be 5 mm behind the nearer line too; where the ends have no depth,
+    or depth far from the fitted lips, the fitted line alone is used."""
+    depth = np.full((100, 100), 500.0)
+    depth[:15, :] = depth[85:, :] = ends
+    depth[30:50, :] = inside
+    depth[15:30, :] = depth[50:85, :] = 500.0 if np.isnan(ends) or ends > 600 else ends
+    gaps = _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
+    assert gaps == pytest.approx((expected_px * PX_MM,) * 2, abs=PX_MM)
+
+
+def test_an_end_off_the_image_takes_the_fitted_lips_depth():
+    """The upper lip's end above the image, the border row at a wall 1.5 m away: the mouth (20 px,
+    15 mm behind) still reads in full."""
+    depth = np.full((100, 100), 500.0)
+    depth[0, :] = 1500.0
+    depth[30:50, :] = 515.0
+    gaps = _gaps_in_depth(np.array([[50.0, -10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
+    assert gaps[1] == pytest.approx(20 * PX_MM, abs=PX_MM)
+
+
+def test_surface_far_behind_the_lips_is_seen_through_a_hole_not_inside_a_mouth():
+    """A run of depth 200 mm behind the lips (the back of a head through a slit) reads as a hole."""
+    depth = np.full((100, 100), 500.0)
+    depth[40:48, :] = 700.0
+    gaps = _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
+    assert gaps == pytest.approx((8 * PX_MM, 0.0), abs=PX_MM)
 
 
 @pytest.mark.parametrize("inside, expected_px", [(510.0, 20), (np.nan, 2)])

@@ -84,7 +84,7 @@ def _agreed(template: Template, found: Detection, label: str, low: list[tuple[st
         if apart <= DISAGREE_MM:
             note = (f"{det.landmarks.note}; a low nose ({check.ridge_mm:.1f} mm above its sides, {check.below_mm:.1f} mm above "
                     f"the lip), and {label} places the mask region {apart:.1f} mm from where {first} does")
-            return Detection(replace(det.landmarks, note=note), det.similarity, det.inliers), check, det
+            return replace(det, landmarks=replace(det.landmarks, note=note)), check, det
     return None
 
 
@@ -141,7 +141,7 @@ def _candidates(scan: Scan, template: Template, noise: LandmarkNoise) -> Iterato
         if det is not None:
             det = with_noise(det, seen, template, noise)
             note = det.landmarks.note + (f"; on renders{without}" if without else "")
-            yield det.landmarks.path + without, Detection(replace(det.landmarks, note=note), det.similarity, det.inliers)
+            yield det.landmarks.path + without, replace(det, landmarks=replace(det.landmarks, note=note))
             if scan.is_capture:
                 second = detect_from_front(replace(scan, colors=None, texture=None, uv=None), template, det.similarity)
                 if second is not None:

@@ -49,9 +49,13 @@ class Sight:
 
 @dataclass(frozen=True)
 class Detection:
+    """Landmarks found, the similarity they place the template by, how many agree with it, and the
+    colour under them (`_skin_tint`; NaN where not found in an image)."""
+
     landmarks: Landmarks
     similarity: Similarity
     inliers: int
+    tint: float = float("nan")
 
 
 def sights(scan: Scan, scene: Scene | None) -> list[Sight]:
@@ -97,7 +101,7 @@ def detect_from_front(scan: Scan, template: Template, pose: Similarity, scene: S
 
 def _as_found_by(det: Detection, path: str) -> Detection:
     """The detection with its landmarks labelled as found by `path` ("image" or "render")."""
-    return Detection(replace(det.landmarks, path=path), det.similarity, det.inliers)
+    return replace(det, landmarks=replace(det.landmarks, path=path))
 
 
 def _best(seen: list[Sight], template: Template, path: str, one_face: bool = True, turns: tuple[int, ...] = (0, 1, 2, 3)) -> Detection | None:
@@ -117,6 +121,9 @@ def _best(seen: list[Sight], template: Template, path: str, one_face: bool = Tru
                     best, crowd = det, (found, sight)
     if one_face and crowd is not None:
         _refuse_two_faces(*crowd, template)
+    if best is not None and best.tint < BLUE_SKIN_TINT:
+        raise InputError(f"the face found is blue, not skin-coloured (red minus blue {best.tint:+.2f} of the brightness): "
+                         "are the colour channels in BGR order? write the colour as RGB")
     return best
 
 
@@ -130,17 +137,14 @@ def _refuse_two_faces(found: list[Detection], sight: Sight, template: Template) 
         raise InputError(f"two faces in the {sight.label}: scan one patient at a time (crop or rescan)")
 
 
-def _refuse_blue_skin(sight: Sight, uv: np.ndarray) -> None:
-    """InputError where the face at the (K, 2) pixels `uv` of the sight's image is blue, not red:
-    median (R - B) / (R + G + B) under BLUE_SKIN_TINT (skin reads +0.09 to +0.49 over the shared real
-    scans and the synthetic skin tones; the TrueDepth frame with its channels swapped, -0.40 to -0.48)."""
-    h, w = sight.image.shape[:2]
+def _skin_tint(image: np.ndarray, uv: np.ndarray) -> float:
+    """Median (R - B) / (R + G + B) of the (H, W, 3) uint8 `image` at the (K, 2) pixels `uv`: skin
+    reads +0.09 to +0.49 over the shared real scans and the synthetic skin tones; the TrueDepth frame
+    with its channels swapped, -0.48."""
+    h, w = image.shape[:2]
     col, row = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1]).T
-    rgb = sight.image[row, col, :3].astype(float)
-    tint = float(np.median((rgb[:, 0] - rgb[:, 2]) / np.maximum(rgb.sum(axis=1), 1.0)))
-    if tint < BLUE_SKIN_TINT:
-        raise InputError(f"the face in the {sight.label} is blue, not skin-coloured (red minus blue {tint:+.2f} of the "
-                         "brightness): are its colour channels in BGR order? write the colour as RGB")
+    rgb = image[row, col, :3].astype(float)
+    return float(np.median((rgb[:, 0] - rgb[:, 2]) / np.maximum(rgb.sum(axis=1), 1.0)))
 
 
 def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndarray, note: str) -> Detection | None:
@@ -160,7 +164,6 @@ def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndar
     inliers = int((fit.weights > 0.5).sum())
     if inliers < MIN_INLIERS:
         return None
-    _refuse_blue_skin(sight, uv)
     # The similarity was fitted in camera coordinates; carry it and the points to the scan frame.
     points = sight.to_scan(cam[index])
     origin = sight.to_scan(np.zeros((1, 3)))[0]
@@ -169,4 +172,5 @@ def _evaluate(sight: Sight, uv: np.ndarray, template: Template, normals: np.ndar
     scan_fit = Similarity(fit.scale, rotation, basis.T @ fit.translation + origin, fit.weights, fit.rms_mm, fit.iterations)
     note = f"{note}; {len(index)} landmarks lifted and facing the camera, {inliers} agree with the template"
     lips = lips_apart_mm(uv, fit, template.landmarks, sight.depth, sight.intrinsics)
-    return Detection(Landmarks(points, index.astype(np.int64), fit.weights, "image", note, lips_apart_mm=lips), scan_fit, inliers)
+    landmarks = Landmarks(points, index.astype(np.int64), fit.weights, "image", note, lips_apart_mm=lips)
+    return Detection(landmarks, scan_fit, inliers, _skin_tint(sight.image, uv[index]))

@@ -12,11 +12,12 @@ in its own way:
   of the lower (17): the longest run with no skin, i.e. no depth or depth over MOUTH_DEPTH_MM behind
   the lips' line. That line is taken twice, through the fitted template's lips and through the
   scan's own depth at the two ends, and a point is behind only if behind both (a face seen from the
-  side misplaces either). A run mostly of seen surface is the inside of the mouth (teeth, tongue);
-  a run mostly without depth may be a hole in the scan, which over-reads.
+  side misplaces either). A run mostly of surface seen up to MOUTH_BACK_MM behind is the inside of
+  the mouth (teeth, tongue); a run mostly without depth, or seen further back, may be a hole in the
+  scan, which over-reads.
 
-The reading is the smaller of the two, or the run of seen surface if longer: holes over-read
-either reading, but only an open mouth shows surface behind the lips.
+The reading is the smaller of the two, or the longest run mostly inside the mouth if longer: holes
+over-read either reading, but only an open mouth shows surface just behind the lips.
 """
 
 import numpy as np
@@ -28,6 +29,8 @@ from ..scan import Intrinsics
 UPPER_INNER, LOWER_INNER = 13, 14
 UPPER_OUTER, LOWER_OUTER = 0, 17
 MOUTH_DEPTH_MM = 5.0  # depth this far behind the lips is the inside of the mouth
+MOUTH_BACK_MM = 60.0  # ... and no further: surface beyond is seen through a hole (the back of a head)
+END_APART_MM = 20.0  # the depth seen at an end of the lips this far from the fitted lips' is not theirs
 STEP_PX = 0.5
 
 
@@ -38,38 +41,42 @@ def lips_apart_mm(uv: np.ndarray, fit: Similarity, template_landmarks: np.ndarra
     `template_landmarks`, and the (H, W) camera depth (mm, NaN where none)."""
     lips = fit.apply(template_landmarks[[UPPER_INNER, LOWER_INNER, UPPER_OUTER, LOWER_OUTER]])
     inner = np.linalg.norm(np.subtract(*backproject_pixels(uv[[UPPER_INNER, LOWER_INNER]], lips[:2, 2], intrinsics)))
-    anywhere, seen = _gaps_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)
-    return float(max(min(inner, anywhere), seen))
+    anywhere, inside_mouth = _gaps_in_depth(uv[[UPPER_OUTER, LOWER_OUTER]], lips[2:, 2], depth_mm, intrinsics)
+    return float(max(min(inner, anywhere), inside_mouth))
 
 
 def _gaps_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrinsics: Intrinsics) -> tuple[float, float]:
     """Lengths (mm) of the longest run without skin along the pixel segment `ends` (2, 2), whose ends
-    lie at depths `z` (2,) mm, and of the longest such run mostly of seen surface (teeth, tongue):
-    without skin is depth missing, or over MOUTH_DEPTH_MM behind both the line between `z` and the
-    line between the depths seen at the ends (where seen)."""
+    lie at depths `z` (2,) mm, and of the longest such run mostly of surface seen inside a mouth
+    (teeth, tongue: MOUTH_DEPTH_MM to MOUTH_BACK_MM behind). Without skin is depth missing, or over
+    MOUTH_DEPTH_MM behind both the line between `z` and the line between the depths seen at the ends
+    (`_end_depth`). A run's length is from its first sample to its last, at the depth of `z`'s line."""
     count = max(2, int(np.ceil(np.linalg.norm(ends[1] - ends[0]) / STEP_PX)) + 1)
     t = np.linspace(0.0, 1.0, count)
     uv = ends[0] + t[:, None] * (ends[1] - ends[0])
     h, w = depth_mm.shape
     pixel = np.round(uv).astype(np.int64)
-    inside = (pixel >= 0).all(axis=1) & (pixel < [w, h]).all(axis=1)
+    on_image = (pixel >= 0).all(axis=1) & (pixel < [w, h]).all(axis=1)
     col, row = np.clip(pixel, 0, [w - 1, h - 1]).T
     expected = z[0] + t * (z[1] - z[0])
-    at_ends = np.array([_depth_near(depth_mm, r, c, fallback) for r, c, fallback in zip(row[[0, -1]], col[[0, -1]], z)])
-    lip_line = np.maximum(expected, at_ends[0] + t * (at_ends[1] - at_ends[0]))
-    seen = depth_mm[row, col]
-    open_ = inside & ~(seen <= lip_line + MOUTH_DEPTH_MM)  # NaN (no depth) counts as open; off the image, unknown
+    at_ends = [_end_depth(depth_mm, row[k], col[k], z[i]) if on_image[k] else z[i] for i, k in ((0, 0), (1, -1))]
+    behind = depth_mm[row, col] - np.maximum(expected, at_ends[0] + t * (at_ends[1] - at_ends[0]))
+    open_ = on_image & ~(behind <= MOUTH_DEPTH_MM)  # NaN (no depth) counts as open; off the image, unknown
+    mouth = behind <= MOUTH_BACK_MM  # seen, and no further back than a mouth goes (not through a hole)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], open_.astype(np.int8), [0]])))
     runs = list(zip(edges[::2], edges[1::2] - 1))
     length = [float(np.linalg.norm(np.subtract(*backproject_pixels(uv[[a, b]], expected[[a, b]], intrinsics)))) for a, b in runs]
-    mostly_seen = [2 * np.isfinite(seen[a:b + 1]).sum() >= b + 1 - a for a, b in runs]
-    return max(length, default=0.0), max((n for n, m in zip(length, mostly_seen) if m), default=0.0)
+    in_mouth = [2 * mouth[a:b + 1].sum() >= b + 1 - a for a, b in runs]
+    return max(length, default=0.0), max((n for n, m in zip(length, in_mouth) if m), default=0.0)
 
 
-def _depth_near(depth_mm: np.ndarray, row: int, col: int, fallback: float, half: int = 2) -> float:
-    """Median depth (mm) of the (2 half + 1)^2 pixels about (row, col), or `fallback` if none has depth."""
+def _end_depth(depth_mm: np.ndarray, row: int, col: int, z: float, half: int = 2) -> float:
+    """Depth (mm) at an end of the lips' segment: the median of the (2 half + 1)^2 pixels about
+    (row, col), or the fitted lips' depth `z` where none has depth or it lies over END_APART_MM
+    from `z` (the background beside a profile, not the lips)."""
     patch = depth_mm[max(row - half, 0):row + half + 1, max(col - half, 0):col + half + 1]
-    return float(np.nanmedian(patch)) if np.isfinite(patch).any() else float(fallback)
+    seen = float(np.nanmedian(patch)) if np.isfinite(patch).any() else z
+    return seen if abs(seen - z) <= END_APART_MM else float(z)
 
 
 def lips_apart_in_points(points: np.ndarray, template_index: np.ndarray) -> float:
