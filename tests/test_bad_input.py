@@ -99,6 +99,15 @@ def _(d, s):
     return [mesh_file(d / "inches.ply", head.vertices / 25.4, head.faces)], words
 
 
+@case("a head mesh with its vertex colours in BGR order")
+def _(d, s):
+    head = ict_head_mesh(1).mesh
+    colours = head.visual.vertex_colors.copy()
+    colours[:, :3] = colours[:, 2::-1]
+    data = trimesh.Trimesh(head.vertices, head.faces, vertex_colors=colours, process=False).export(file_type="ply")
+    return [_write(d / "bgr.ply", data)], ["blue", "BGR"]
+
+
 @case("text with a mesh extension")
 def _(d, s):
     return [_write(d / "notes.obj", b"these are my notes, not a mesh\n")], ["no mesh"]
