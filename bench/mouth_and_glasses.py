@@ -1,5 +1,5 @@
-"""An open mouth, or glasses: framed synthetic subjects with the jaw dropped
-or a glasses frame on, designed end to end. Printed per subject and opening: the mean error of the
+"""An open mouth, or glasses: synthetic subjects (framed template-made ones, or ICT faces) with the
+jaw dropped or a glasses frame on, designed end to end. Printed per subject and opening: the mean error of the
 registered mask region against the truth (mm), the seal curve's largest distance from the true skin
 (mm), the lips' opening as detected (mm), the area in front of the face (mm²), and the outcome
 (flags, or the gate that refused). Gates: `lips_apart_mm` (oronasal), `in_front_mm2`. With --mesh,
@@ -79,7 +79,7 @@ def main() -> None:
     ap.add_argument("--mm", default="0,2,4,8", help="how far the lower lip moves, mm, comma-separated")
     ap.add_argument("--glasses", action="store_true", help="a glasses frame on every subject")
     ap.add_argument("--mask", default="oronasal")
-    ap.add_argument("--mesh", choices=("colour", "bare"), default=None, help="as a mesh scan, turned at random")
+    ap.add_argument("--mesh", choices=("colour", "bare"), default=None, help="as a mesh scan: template subjects turned at random, ICT ones their head mesh")
     ap.add_argument("--population", choices=("template", "ict"), default="template")
     args = ap.parse_args()
     if args.population == "ict" and (args.glasses or args.mesh == "bare"):

@@ -145,29 +145,32 @@ def test_lips_whose_fitted_depth_is_off_are_read_from_the_depth_at_their_ends():
         20 * PX_MM, abs=PX_MM)
 
 
-@pytest.mark.parametrize("ends, inside, expected_px", [
-    (488.0, 496.0, 0),  # the fitted lips 12 mm behind the scan's: 8 mm behind those is still lips
-    (np.nan, 520.0, 20),  # no depth at the ends: the fitted lips' line
-    (1500.0, 520.0, 20),  # the background at the ends (a profile's edge): the fitted lips' line
+@pytest.mark.parametrize("ends, lips, inside, expected_px", [
+    (488.0, 488.0, 496.0, 0),  # the scan's lips 12 mm in front of the fitted ones: 8 mm behind them is still lips
+    (530.0, 530.0, 535.0, 0),  # the scan's lips 30 mm behind the fitted ones (a misplaced fit): 5 mm behind them is lips
+    (530.0, 530.0, 560.0, 20),  # ... 30 mm behind them is a mouth
+    (np.nan, 500.0, 520.0, 20),  # no depth at the segment's ends: the fitted lips' line
+    (1500.0, 500.0, 520.0, 20),  # the background at the ends (a profile's edge): the fitted lips' line
 ])
-def test_the_lips_line_is_behind_both_the_fitted_and_the_seen_lips(ends, inside, expected_px):
-    """Fitted lips at 500 mm, a mouth over rows 30-49: where the scan's lips are nearer than the
-    fitted ones, a point must be 5 mm behind the nearer line too; where the ends have no depth,
-    or depth far from the fitted lips, the fitted line alone is used."""
-    depth = np.full((100, 100), 500.0)
+def test_the_lips_line_is_behind_both_the_fitted_and_the_seen_lips(ends, lips, inside, expected_px):
+    """Fitted lips at 500 mm; the segment's ends (rows 10 and 90) on depth `ends`, the lips between
+    at `lips`, a mouth over rows 30-49 at `inside`: a point is inside the mouth only if 5 mm behind
+    both the fitted lips' line and the line through the depth seen at the ends; ends without depth,
+    or over 60 mm behind the fitted lips, give the fitted line alone."""
+    depth = np.full((100, 100), lips)
     depth[:15, :] = depth[85:, :] = ends
     depth[30:50, :] = inside
-    depth[15:30, :] = depth[50:85, :] = 500.0 if np.isnan(ends) or ends > 600 else ends
     gaps = _gaps_in_depth(np.array([[50.0, 10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
-    assert gaps == pytest.approx((expected_px * PX_MM,) * 2, abs=PX_MM)
+    assert gaps[1] == pytest.approx(expected_px * PX_MM, abs=PX_MM)
 
 
 def test_an_end_off_the_image_takes_the_fitted_lips_depth():
-    """The upper lip's end above the image, the border row at a wall 1.5 m away: the mouth (20 px,
-    15 mm behind) still reads in full."""
+    """The upper lip's end above the image, the image's top rows 15 mm behind the fitted lips (not
+    the lips: clipped to the image, they would pull the lips' line back): the mouth (20 px, 12 mm
+    behind the fitted lips) reads in full."""
     depth = np.full((100, 100), 500.0)
-    depth[0, :] = 1500.0
-    depth[30:50, :] = 515.0
+    depth[:3, :] = 515.0
+    depth[30:50, :] = 512.0
     gaps = _gaps_in_depth(np.array([[50.0, -10.0], [50.0, 90.0]]), np.array([500.0, 500.0]), depth, CAMERA)
     assert gaps[1] == pytest.approx(20 * PX_MM, abs=PX_MM)
 

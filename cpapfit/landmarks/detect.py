@@ -50,7 +50,7 @@ class Sight:
 @dataclass(frozen=True)
 class Detection:
     """Landmarks found, the similarity they place the template by, how many agree with it, and the
-    colour under them (`_skin_tint`; NaN where not found in an image)."""
+    colour under them (`_skin_tint`; NaN where not measured)."""
 
     landmarks: Landmarks
     similarity: Similarity
@@ -109,7 +109,8 @@ def _best(seen: list[Sight], template: Template, path: str, one_face: bool = Tru
     k in `turns`), or None. `one_face`: refuse when the sight and rotation of that detection show two
     faces that lift onto the depth as two heads (`_refuse_two_faces`; only there: in a face turned
     upside down MediaPipe can see a second, phantom face; a frontal render frames one face only:
-    skipped)."""
+    skipped). InputError too where the winner's colour is blue, not skin (`_skin_tint` under
+    BLUE_SKIN_TINT: the colour channels in BGR order)."""
     best, crowd = None, None
     normals = template.mesh().vertex_normals[:N_LANDMARKS]
     for sight in seen:
@@ -122,7 +123,8 @@ def _best(seen: list[Sight], template: Template, path: str, one_face: bool = Tru
     if one_face and crowd is not None:
         _refuse_two_faces(*crowd, template)
     if best is not None and best.tint < BLUE_SKIN_TINT:
-        raise InputError(f"the face found is blue, not skin-coloured (red minus blue {best.tint:+.2f} of the brightness): "
+        raise InputError(f"the face found ({best.landmarks.note.split(';')[0]}) is blue, not skin-coloured (red minus blue "
+                         f"{best.tint:+.2f} of the brightness): "
                          "are the colour channels in BGR order? write the colour as RGB")
     return best
 

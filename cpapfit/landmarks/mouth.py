@@ -11,13 +11,15 @@ in its own way:
 - the depth down the middle of the lips, from the top of the upper lip (landmark 0) to the bottom
   of the lower (17): the longest run with no skin, i.e. no depth or depth over MOUTH_DEPTH_MM behind
   the lips' line. That line is taken twice, through the fitted template's lips and through the
-  scan's own depth at the two ends, and a point is behind only if behind both (a face seen from the
-  side misplaces either). A run mostly of surface seen up to MOUTH_BACK_MM behind is the inside of
+  scan's own depth at the two ends (the fitted lips' where an end is off the image, has no depth,
+  or lies over MOUTH_BACK_MM behind them), and a point is behind only if behind both (a face seen
+  from the side misplaces either). A run mostly of surface seen up to MOUTH_BACK_MM behind is the inside of
   the mouth (teeth, tongue); a run mostly without depth, or seen further back, may be a hole in the
   scan, which over-reads.
 
 The reading is the smaller of the two, or the longest run mostly inside the mouth if longer: holes
-over-read either reading, but only an open mouth shows surface just behind the lips.
+over-read either reading, but only an open mouth shows surface 5-60 mm behind the lips (a hole
+shows none, or what lies further back).
 """
 
 import numpy as np
@@ -29,8 +31,7 @@ from ..scan import Intrinsics
 UPPER_INNER, LOWER_INNER = 13, 14
 UPPER_OUTER, LOWER_OUTER = 0, 17
 MOUTH_DEPTH_MM = 5.0  # depth this far behind the lips is the inside of the mouth
-MOUTH_BACK_MM = 60.0  # ... and no further: surface beyond is seen through a hole (the back of a head)
-END_APART_MM = 20.0  # the depth seen at an end of the lips this far from the fitted lips' is not theirs
+MOUTH_BACK_MM = 60.0  # ... and no further: surface beyond is seen through a hole (the back of a head), or background
 STEP_PX = 0.5
 
 
@@ -59,10 +60,10 @@ def _gaps_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrin
     on_image = (pixel >= 0).all(axis=1) & (pixel < [w, h]).all(axis=1)
     col, row = np.clip(pixel, 0, [w - 1, h - 1]).T
     expected = z[0] + t * (z[1] - z[0])
-    at_ends = [_end_depth(depth_mm, row[k], col[k], z[i]) if on_image[k] else z[i] for i, k in ((0, 0), (1, -1))]
+    at_ends = [_end_depth(depth_mm, row[k], col[k], z[i]) if on_image[k] else z[i] for i, k in enumerate((0, -1))]
     behind = depth_mm[row, col] - np.maximum(expected, at_ends[0] + t * (at_ends[1] - at_ends[0]))
     open_ = on_image & ~(behind <= MOUTH_DEPTH_MM)  # NaN (no depth) counts as open; off the image, unknown
-    mouth = behind <= MOUTH_BACK_MM  # seen, and no further back than a mouth goes (not through a hole)
+    mouth = open_ & (behind <= MOUTH_BACK_MM)  # seen, and no further back than a mouth goes (not through a hole)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], open_.astype(np.int8), [0]])))
     runs = list(zip(edges[::2], edges[1::2] - 1))
     length = [float(np.linalg.norm(np.subtract(*backproject_pixels(uv[[a, b]], expected[[a, b]], intrinsics)))) for a, b in runs]
@@ -72,11 +73,11 @@ def _gaps_in_depth(ends: np.ndarray, z: np.ndarray, depth_mm: np.ndarray, intrin
 
 def _end_depth(depth_mm: np.ndarray, row: int, col: int, z: float, half: int = 2) -> float:
     """Depth (mm) at an end of the lips' segment: the median of the (2 half + 1)^2 pixels about
-    (row, col), or the fitted lips' depth `z` where none has depth or it lies over END_APART_MM
-    from `z` (the background beside a profile, not the lips)."""
+    (row, col), or the fitted lips' depth `z` where none has depth or it lies over MOUTH_BACK_MM
+    behind `z` (the background beside a profile, not the lips)."""
     patch = depth_mm[max(row - half, 0):row + half + 1, max(col - half, 0):col + half + 1]
-    seen = float(np.nanmedian(patch)) if np.isfinite(patch).any() else z
-    return seen if abs(seen - z) <= END_APART_MM else float(z)
+    seen = np.nanmedian(patch) if np.isfinite(patch).any() else np.nan
+    return float(seen) if seen - z <= MOUTH_BACK_MM else float(z)
 
 
 def lips_apart_in_points(points: np.ndarray, template_index: np.ndarray) -> float:

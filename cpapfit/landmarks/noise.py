@@ -40,4 +40,4 @@ def with_noise(found: Detection, scan: Scan, template: Template, noise: Landmark
     points = on_skin(scan, lm.points, noise.sigma_mm, noise.seed)
     fit = fit_similarity(template.vertices[lm.template_index], points)
     note = f"{lm.note}; noise of {noise.sigma_mm:g} mm added (seed {noise.seed})"
-    return Detection(replace(lm, points=points, confidence=fit.weights, note=note), fit, found.inliers)
+    return replace(found, landmarks=replace(lm, points=points, confidence=fit.weights, note=note), similarity=fit)
