@@ -142,7 +142,7 @@ def _refuse_two_faces(found: list[Detection], sight: Sight, template: Template) 
 def _skin_tint(image: np.ndarray, uv: np.ndarray) -> float:
     """Median (R - B) / (R + G + B) of the (H, W, 3) uint8 `image` at the (K, 2) pixels `uv`: skin
     reads +0.09 to +0.49 over the shared real scans and the synthetic skin tones; the TrueDepth frame
-    with its channels swapped, -0.48."""
+    with its channels swapped, -0.47."""
     h, w = image.shape[:2]
     col, row = np.clip(np.round(uv).astype(np.int64), 0, [w - 1, h - 1]).T
     rgb = image[row, col, :3].astype(float)

@@ -13,9 +13,9 @@ in its own way:
   the lips' line. That line is taken twice, through the fitted template's lips and through the
   scan's own depth at the two ends (the fitted lips' where an end is off the image, has no depth,
   or lies over MOUTH_BACK_MM behind them), and a point is behind only if behind both (a face seen
-  from the side misplaces either). A run mostly of surface seen up to MOUTH_BACK_MM behind is the inside of
-  the mouth (teeth, tongue); a run mostly without depth, or seen further back, may be a hole in the
-  scan, which over-reads.
+  from the side misplaces either). A run mostly of surface seen up to MOUTH_BACK_MM behind is the
+  inside of the mouth (teeth, tongue); a run mostly without depth, or seen further back, may be a
+  hole in the scan, which over-reads.
 
 The reading is the smaller of the two, or the longest run mostly inside the mouth if longer: holes
 over-read either reading, but only an open mouth shows surface 5-60 mm behind the lips (a hole
