@@ -229,6 +229,14 @@ def _(d, s):
     return [d], ["valid"]
 
 
+@case("half the depth pixels dropped at random")
+def _(d, s):
+    depth = s.ph.depth_raw.copy()
+    depth[np.random.default_rng(0).random(depth.shape) < 0.5] = 0  # too few whole triangles for the face check's probes
+    save_png(capture(d, s) / "depth.png", depth)
+    return [d], ["pixels hold depth", "holes"]
+
+
 @case("depth in the wrong depth_scale")
 def _(d, s):
     edit_intrinsics(capture(d, s), depth_scale=10.0)  # 10 units per metre: the face 350 m away
