@@ -34,24 +34,30 @@ def template_subject(seed: int):
         return load_scan(Path(tmp)), ph.surface
 
 
-def both_runs(scan, truth) -> dict:
-    """Each start's run on `scan` (its figures, mm) and the start kept."""
-    out = {}
+def runs_of(scan) -> tuple[str, dict]:
+    """The start `register_template` keeps on `scan` and both its elastic runs (`Registration`), by start."""
+    got = {}
     runs = nr._runs
 
     def spy(*args, **kwargs):
         done = runs(*args, **kwargs)
-        for name, (_, reg) in zip(("affine", "morphable"), done):
-            out[name] = {"bending": reg.bending, "distance_mm": nr._mean_distance(reg),
-                         **{m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}}
+        got.update(zip(("affine", "morphable"), (reg for _, reg in done)))
         return done
 
     nr._runs = spy
     try:
-        out["kept"] = register_template(scan, align(scan)).start
+        kept = register_template(scan, align(scan)).start
     finally:
         nr._runs = runs
-    return out
+    return kept, got
+
+
+def both_runs(scan, truth) -> dict:
+    """Each start's run on `scan` (its figures, mm) and the start kept."""
+    kept, runs = runs_of(scan)
+    return {name: {"bending": reg.bending, "distance_mm": nr._mean_distance(reg),
+                   **{m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}}
+            for name, reg in runs.items()} | {"kept": kept}
 
 
 def main() -> None:
