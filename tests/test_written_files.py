@@ -1,5 +1,7 @@
 """Mesh files checked as a slicer reads them back: float32 corners, vertices merged by position."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -97,3 +99,22 @@ def test_a_solid_two_metres_from_the_origin_is_welded_where_its_file_would_merge
     welded = written_clean(far)
     assert welded.volume == pytest.approx(far.volume, abs=1e-6)
     assert check_file(read_stl(checked_files(welded, "far")["far.stl"]), "far.stl")["zero_area_triangles"] == 0
+
+
+def test_a_sliver_a_few_float32_steps_across_is_welded_wider_until_its_file_is_clean():
+    """A mould half of a design on an ICT head as its STL read back (tests/data/mould_part_sliver.npz,
+    5 066 vertices): one triangle of it, 3e-5 mm across where two sheets 1 mm apart meet, has no area
+    as written, and a weld at WELD_MM keeps it; the wider welds that follow take it out, the volume
+    the same to 0.01 mm3 (of 195 000)."""
+    from cpapfit.fabrication.files import WELD_MM, _welded, as_written, clean_as_written
+    from cpapfit.solids import to_manifold, to_trimesh
+
+    data = np.load(Path(__file__).parent / "data" / "mould_part_sliver.npz")
+    part = trimesh.Trimesh(data["vertices"].astype(np.float64), data["faces"].astype(np.int64), process=False)
+    with pytest.raises(SolidError, match="'zero_area_triangles': 1"):
+        checked_files(part, "part")
+    solid = to_manifold(part)
+    assert as_written(to_trimesh(_welded(solid, WELD_MM))).area_faces.min() < 1e-10
+    cleaned = clean_as_written(solid)
+    assert check_file(read_stl(checked_files(cleaned, "part")["part.stl"]), "part.stl")["zero_area_triangles"] == 0
+    assert cleaned.volume == pytest.approx(part.volume, abs=0.01)

@@ -17,6 +17,7 @@ from ..thresholds import WALL_TOLERANCE, ZERO_AREA_MM2
 
 
 WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
+WELD_GROWTH = 10.0  # each further weld merges vertices this many times farther apart (at most 1e-3 mm: far under a printer's resolution)
 PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
 CLEAN_PASSES = 3  # welds (and pinch cuts) a part gets at most to be clean as written
 SLIVER_MM3 = 0.1  # a piece of a part smaller than this is a boolean's sliver, not material
@@ -120,18 +121,20 @@ def written_clean(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 def clean_as_written(part: manifold3d.Manifold) -> trimesh.Trimesh:
     """A part made clean as its float32 file reads back (`check_file`): `_welded`, and again while
     the file would still hold a triangle under ZERO_AREA_MM2 (a weld's output rounded to float32
-    can leave two vertices one float32 step apart) or two sheets touching along an edge (an edge
-    of the file in four triangles: a bar PINCH_MM across is cut out along it first), at most
-    CLEAN_PASSES times; what is left the check at writing refuses."""
-    welded = _welded(part)
+    can leave two vertices one float32 step apart, or a sliver whose edges are a few steps long:
+    3e-5 mm on a mould of an ICT head, which a weld at WELD_MM keeps) or two sheets touching along
+    an edge (an edge of the file in four triangles: a bar PINCH_MM across is cut out along it
+    first), at most CLEAN_PASSES times, each weld WELD_GROWTH times wider than the last; what is
+    left the check at writing refuses."""
+    welded = _welded(part, WELD_MM)
     corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    for _ in range(CLEAN_PASSES):
+    for attempt in range(1, CLEAN_PASSES + 1):
         written = as_written(to_trimesh(welded))
         if _reads_back_clean(written):
             break
         for ends in written.vertices[unpaired_edges(written)]:  # (2, 3) each
             welded = welded - manifold3d.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
-        welded = _welded(welded)
+        welded = _welded(welded, WELD_MM * WELD_GROWTH**attempt)
     return to_trimesh(welded)
 
 
@@ -140,11 +143,11 @@ def _reads_back_clean(written: trimesh.Trimesh) -> bool:
     return not len(unpaired_edges(written)) and written.area_faces.min(initial=np.inf) >= ZERO_AREA_MM2
 
 
-def _welded(part: manifold3d.Manifold) -> manifold3d.Manifold:
+def _welded(part: manifold3d.Manifold, tolerance_mm: float) -> manifold3d.Manifold:
     """A part with its vertices rounded to float32, as its file holds them, and those then within
-    WELD_MM (those that coincide) merged (manifold3d), dropping the slivers this parts from it
+    `tolerance_mm` (those that coincide) merged (manifold3d), dropping the slivers this parts from it
     (under SLIVER_MM3)."""
-    welded = to_manifold(to_trimesh(part)).simplify(WELD_MM)
+    welded = to_manifold(to_trimesh(part)).simplify(tolerance_mm)
     return manifold3d.Manifold.compose([body for body in welded.decompose() if body.volume() >= SLIVER_MM3])
 
 
