@@ -286,6 +286,41 @@ def test_a_cheap_camera_far_away_still_gives_a_cushion_on_the_skin(tmp_path):
 
 
 @pytest.mark.parametrize("cloud", [False, True], ids=["mesh", "point cloud"])
+def test_a_second_layer_behind_a_hole_is_not_the_skin(cloud):
+    """The flat scan with its 6 mm hole, and a second sheet 7 mm behind it (a nostril's inside): a
+    seal point over the hole stays where it is (7.5 mm down its normal is past the registration's own
+    5 mm gate), one over data drops 0.5 mm onto the scan as before."""
+    n = 31
+    xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
+    front = grid_faces(n)[(np.linalg.norm(xy[grid_faces(n)], axis=2) > 6.0).all(axis=1)]
+    inner = np.linalg.norm(xy, axis=1) < 8.0
+    back = np.flatnonzero(inner)
+    vertices = np.vstack([np.column_stack([xy, np.zeros(n * n)]), np.column_stack([xy[back], np.full(len(back), -7.0)])])
+    index = np.full(n * n, -1)
+    index[back] = n * n + np.arange(len(back))
+    behind = index[grid_faces(n)[inner[grid_faces(n)].all(axis=1)]]
+    faces = np.zeros((0, 3), dtype=np.int64) if cloud else np.vstack([front, behind])
+    used = np.concatenate([np.unique(front), n * n + np.arange(len(back))]) if cloud else np.arange(len(vertices))
+    if cloud:
+        vertices = vertices[used]
+    scan = Scan(vertices, faces, np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
+    points = np.array([[0.0, 0.0, 0.5], [10.0, 0.0, 0.5]])
+    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (2, 1)), scan_surface(scan))
+    assert on_scan.tolist() == [False, True]
+    assert np.allclose(moved, [[0.0, 0.0, 0.5], [10.0, 0.0, 0.0]], atol=1e-9)
+
+
+def test_a_coarse_clouds_skin_is_found_between_its_points():
+    """A flat cloud of points 2 mm apart: a seal point whose normal passes midway between four of them
+    (1.4 mm from each, over TANGENT_MM) is on the skin, and drops 0.5 mm onto it."""
+    xy = 2.0 * np.stack(np.meshgrid(np.arange(16) - 8.0, np.arange(16) - 8.0), -1).reshape(-1, 2)  # even mm
+    scan = Scan(np.column_stack([xy, np.zeros(len(xy))]), np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(xy), 1)))
+    points = np.array([[1.0, 1.0, 0.5], [3.0, -3.0, 0.5]])
+    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (2, 1)), scan_surface(scan))
+    assert on_scan.all() and np.allclose(moved[:, 2], 0.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("cloud", [False, True], ids=["mesh", "point cloud"])
 def test_seal_points_reach_a_scan_tilted_against_the_template(cloud):
     """Where the registered template is 3 mm off a scan tilted 40° against its normal, the seal
     point lands on the scan straight along its normal (its closest point lies 1.9 mm sideways: a

@@ -6,7 +6,9 @@ warped vertices) they land on the patient's face; each is then moved along the s
 the scan itself where the scan has data within PROJECT_MM along that normal (a point over a hole
 stays: the seal must not be dragged to the hole's rim), so the cushion touches the real face
 rather than the template's approximation of it. For a point cloud, "along the normal" means
-within TANGENT_MM of the normal line. "Onto the scan" means onto the skin the scan measures: a
+within TANGENT_MM of the normal line, or within the cloud's local spacing there where that is more
+(`gap.local_spacing`: through a cloud 1.9 mm apart a line misses every point within 1 mm on a third
+of the seal). "Onto the scan" means onto the skin the scan measures: a
 quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
 width SKIN_WIDTH_MM, widened to take in SKIN_NEIGHBOURS points where the scan is coarse), so that
 the seal follows the face and not the sensor's noise or depth steps (a local moving-least-squares
@@ -14,7 +16,10 @@ projection). On a sparse mesh, too coarse to fit, the crossing itself is the ski
 offset from the template then becomes the median over OUTLIER_SAMPLES scanned neighbours along the
 seal, so that one stray fit or crossing (a flying pixel, a depth step, a normal line through a
 nostril's opening: a seal curve turning back on itself by 167 degrees, on a head mesh with 2 mm
-facets) cannot kink the seal. A head modelled with its nostrils' insides has a second layer of skin a few mm behind the
+facets) cannot kink the seal; an offset over OFFSET_MM (the registration's own pair gate: the
+registered face lies on the scan it was paired with to a fraction of that) is another surface, and
+the point counts as over no data (a cloud of a head with its nostrils' insides, 1.9 mm apart: three
+neighbouring seal points 7-9 mm inside the nose, which the running median keeps). A head modelled with its nostrils' insides has a second layer of skin a few mm behind the
 ala: only triangles and points facing the way the skin does count, and a skin fit that would leave a
 point over LAYER_MM farther from the scan's nearest point than it began (through both layers: a seal
 2-8 mm inside the nose) gives way to the crossing itself. Where the scan has no data the seal keeps
@@ -32,13 +37,15 @@ from scipy.ndimage import gaussian_filter1d, median_filter
 from scipy.spatial import cKDTree
 
 from ..crop import reachable
+from ..evaluation.gap import local_spacing
 from ..frozen import freeze_arrays
 from ..template import Template, load_template
 
 SAMPLES = 128  # points around the seal
 SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples
 PROJECT_MM = 10.0  # no scan within this along the skin normal: no data there, keep the registered point
-TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than this is a hole's rim
+TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than this (or the local spacing) is a hole's rim
+OFFSET_MM = 5.0  # a seal point this far from the registered face along its normal has met another surface (NonrigidParams.max_distance_mm)
 SKIN_WIDTH_MM = 2.0  # Gaussian width of the local skin fit; scan points within twice this take part
 FADE_MM = 10.0  # arc length over which the scan's offset fades into a gap in the data
 SKIN_MIN_POINTS = 12  # fewer scan points than this around a seal point (a sparse mesh): keep its closest point
@@ -125,6 +132,7 @@ def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh 
     offset = np.einsum("ij,ij->i", skin - points, normals)
     astray = np.linalg.norm(skin - nearest, axis=1) > np.linalg.norm(points - nearest, axis=1) + LAYER_MM
     offset[astray] = np.einsum("ij,ij->i", hit - points, normals)[astray]  # the skin fit reached another layer: the crossing
+    near &= np.abs(offset) <= OFFSET_MM
     if near.any():
         offset[near] = median_filter(offset[near], size=min(OUTLIER_SAMPLES, int(near.sum())), mode="wrap")
     return np.where(near[:, None], points + offset[:, None] * normals, points), near
@@ -184,14 +192,16 @@ def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh, w
 def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: cKDTree) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) where each point's normal line passes the cloud: level with the cloud point nearest the
     point along the line among those within TANGENT_MM of it and PROJECT_MM of the point (a ray cast
-    at a cloud; `local_skin` then puts it on the skin there), and (K,) whether there is one (where
-    not, the point itself). `cloud`: the cloud's k-d tree (the surface's own, built once)."""
+    at a cloud; `local_skin` then puts it on the skin there; the cloud's local spacing there instead
+    of TANGENT_MM where it is more), and (K,) whether there is one (where not, the point itself).
+    `cloud`: the cloud's k-d tree (the surface's own, built once)."""
     hit, near = points.copy(), np.zeros(len(points), dtype=bool)
+    reach = np.maximum(TANGENT_MM, local_spacing(cloud, points))
     for k, around in enumerate(cloud.query_ball_point(points, PROJECT_MM)):  # each list ascending
         offset = cloud.data[np.asarray(around, dtype=np.int64)] - points[k]
         along = offset @ normals[k]
         sideways = np.linalg.norm(offset - along[:, None] * normals[k], axis=1)
-        on_line = np.flatnonzero(sideways <= TANGENT_MM)
+        on_line = np.flatnonzero(sideways <= reach[k])
         if len(on_line):
             nearest = on_line[np.argmin(np.abs(along[on_line]))]
             hit[k], near[k] = points[k] + along[nearest] * normals[k], True
