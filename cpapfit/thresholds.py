@@ -50,7 +50,7 @@ MIN_BELOW_MM = 8.0
 LOW_NOSE_MM = 2.5  # a nose this high above its sides and below, short of the two above, passes with a second look's agreement
 SCALE_RANGE = (0.7, 1.4)
 MAX_TURNED_DEG = 90.0
-SPARSE_DEPTH = 0.6  # a capture with less of its face's pixels holding depth is said to be riddled with holes (gates nothing; 30 % of pixels dropped at random: 0.62, designed; 50 %: 0.44, refused; the TrueDepth frame 0.87)
+SPARSE_DEPTH = 0.6  # a capture with depth at less of its face's points' pixels is said to be riddled with holes (gates nothing; 30 % of pixels dropped at random: 0.62, designed; 50 %: 0.44, refused; the TrueDepth frame 0.87)
 
 # --- Alignment (`align/initial.py`) ---
 # A face found on renders framed by the landmark-free alignment's pose is the face that alignment

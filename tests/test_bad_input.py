@@ -234,7 +234,7 @@ def _(d, s):
     depth = s.ph.depth_raw.copy()
     depth[np.random.default_rng(0).random(depth.shape) < 0.5] = 0  # too few whole triangles for the face check's probes
     save_png(capture(d, s) / "depth.png", depth)
-    return [d], ["pixels hold depth", "holes"]
+    return [d], ["face's pixels", "holes"]
 
 
 @case("depth in the wrong depth_scale")

@@ -289,7 +289,7 @@ def test_a_cheap_camera_far_away_still_gives_a_cushion_on_the_skin(tmp_path):
 def test_a_second_layer_behind_a_hole_is_not_the_skin(cloud):
     """The flat scan with its 6 mm hole, and a second sheet 7 mm behind it (a nostril's inside): a
     seal point over the hole stays where it is (7.5 mm down its normal is past the registration's own
-    5 mm gate), one over data drops 0.5 mm onto the scan as before."""
+    5 mm gate), one over data drops 0.5 mm onto the scan."""
     n = 31
     xy = np.stack(np.meshgrid(np.arange(n) - 15.0, np.arange(n) - 15.0), -1).reshape(-1, 2)
     front = grid_faces(n)[(np.linalg.norm(xy[grid_faces(n)], axis=2) > 6.0).all(axis=1)]
@@ -310,14 +310,18 @@ def test_a_second_layer_behind_a_hole_is_not_the_skin(cloud):
     assert np.allclose(moved, [[0.0, 0.0, 0.5], [10.0, 0.0, 0.0]], atol=1e-9)
 
 
-def test_a_coarse_clouds_skin_is_found_between_its_points():
-    """A flat cloud of points 2 mm apart: a seal point whose normal passes midway between four of them
-    (1.4 mm from each, over TANGENT_MM) is on the skin, and drops 0.5 mm onto it."""
-    xy = 2.0 * np.stack(np.meshgrid(np.arange(16) - 8.0, np.arange(16) - 8.0), -1).reshape(-1, 2)  # even mm
+def test_a_coarse_clouds_skin_is_found_between_its_points_but_not_over_its_holes():
+    """A flat cloud of points 2 mm apart with a hole of radius 8 mm: a seal point whose normal passes
+    midway between four of them (1.4 mm from each, over TANGENT_MM) is on the skin, and drops 0.5 mm
+    onto it; one over the hole whose nearest point lies 2.2 mm to its side stays, though the spacing
+    read there is 3.3 mm (a rim's points have neighbours on one side only)."""
+    xy = 2.0 * np.stack(np.meshgrid(np.arange(21) - 10.0, np.arange(21) - 10.0), -1).reshape(-1, 2)  # even mm
+    xy = xy[np.linalg.norm(xy - [8.0, 0.0], axis=1) > 8.0]
     scan = Scan(np.column_stack([xy, np.zeros(len(xy))]), np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(xy), 1)))
-    points = np.array([[1.0, 1.0, 0.5], [3.0, -3.0, 0.5]])
-    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (2, 1)), scan_surface(scan))
-    assert on_scan.all() and np.allclose(moved[:, 2], 0.0, atol=1e-6)
+    points = np.array([[-7.0, 1.0, 0.5], [-5.0, -3.0, 0.5], [1.0, 0.0, 0.5]])
+    moved, on_scan = onto_scan(points, np.tile([0.0, 0.0, 1.0], (3, 1)), scan_surface(scan))
+    assert on_scan.tolist() == [True, True, False]
+    assert np.allclose(moved[:2, 2], 0.0, atol=1e-6) and np.array_equal(moved[2], points[2])
 
 
 @pytest.mark.parametrize("cloud", [False, True], ids=["mesh", "point cloud"])

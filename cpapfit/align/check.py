@@ -19,9 +19,9 @@ Measures of the template's central face, carried by the similarity onto the scan
 - scale: the similarity's, template to scan. Adult faces differ from the template (an average
   adult's) by ~10 % in size; a face "found" at half or twice its size is another shape mistaken
   for one (a render's shading, a face seen at the wrong distance), or a scan in other units;
-- depth (a capture only): the share of the central face's pixels that hold depth. It gates
-  nothing, but a depth image riddled with holes meshes to too few triangles for the nose probes,
-  and the refusal then says so;
+- depth (a capture only): the share of the central face's points whose pixel holds depth. It
+  gates nothing, but a depth image riddled with holes meshes to too few triangles for the nose
+  probes, and the measures then say so;
 - turned (a capture only): the angle between the face's forward direction and the way from its nose
   tip to the camera. A camera sees a face from in front; a template facing away from it lies on the
   inside of a face shell seen from behind (a hollow mask), whose points are a face's.
@@ -59,8 +59,8 @@ class FaceCheck:
     those; ridge_mm, below_mm: how far the scan's nose tip stands out above the scan beside it and
     below it (a box's edge is a ridge but not a peak; NaN where the scan has no data there, which
     fails); scale: the template's size on the scan; turned_deg: the face's forward direction from the
-    way to the camera, degrees; depth_fraction: the share of the central face's pixels with depth (both NaN
-    for a mesh or point cloud)."""
+    way to the camera, degrees; depth_fraction: the share of the central face's points whose pixel holds
+    depth (both NaN for a mesh or point cloud)."""
 
     coverage: float
     median_gap_mm: float
@@ -94,7 +94,7 @@ class FaceCheck:
             f"{self.median_gap_mm:.1f} mm (at most {MAX_MEDIAN_GAP_MM}), nose tip {sides} and {below}, "
             f"template scaled x{self.scale:.2f} (an adult face: x{SCALE_RANGE[0]:g}-{SCALE_RANGE[1]:g})"
             + (f", turned {self.turned_deg:.0f} deg from the camera (at most {MAX_TURNED_DEG:g})" if np.isfinite(self.turned_deg) else "")
-            + (f", only {100 * self.depth_fraction:.0f} % of the face's pixels hold depth (the sensor's depth is riddled with holes)"
+            + (f", depth at only {100 * self.depth_fraction:.0f} % of the face's pixels (the sensor's depth is riddled with holes)"
                if self.depth_fraction < SPARSE_DEPTH else "")
         )
 
@@ -112,15 +112,15 @@ def check_face(scan: Scan, template: Template, similarity: Similarity, central: 
 
 
 def _depth_fraction(scan: Scan, points: np.ndarray) -> float:
-    """Share of a capture's pixels under the (K, 3) mm camera-frame `points` that hold depth (those in
-    view; 0 with none in view); NaN for other scans."""
-    if not scan.is_capture:
+    """Share of the (K, 3) mm camera-frame `points` in a capture's view whose pixel holds depth; NaN
+    with none in view, or for other scans."""
+    if not scan.is_capture or scan.valid is None or scan.intrinsics is None:
         return np.nan
     ahead = points[points[:, 2] > 0]
     uv = np.round(project(ahead, scan.intrinsics)).astype(np.int64)
     h, w = scan.valid.shape
     seen = (uv >= 0).all(axis=1) & (uv[:, 0] < w) & (uv[:, 1] < h)
-    return float(scan.valid[uv[seen, 1], uv[seen, 0]].mean()) if seen.any() else 0.0
+    return float(scan.valid[uv[seen, 1], uv[seen, 0]].mean()) if seen.any() else np.nan
 
 
 def _turned(scan: Scan, template: Template, similarity: Similarity) -> float:

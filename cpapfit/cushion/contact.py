@@ -6,9 +6,10 @@ warped vertices) they land on the patient's face; each is then moved along the s
 the scan itself where the scan has data within PROJECT_MM along that normal (a point over a hole
 stays: the seal must not be dragged to the hole's rim), so the cushion touches the real face
 rather than the template's approximation of it. For a point cloud, "along the normal" means
-within TANGENT_MM of the normal line, or within the cloud's local spacing there where that is more
-(`gap.local_spacing`: through a cloud 1.9 mm apart a line misses every point within 1 mm on a third
-of the seal). "Onto the scan" means onto the skin the scan measures: a
+within TANGENT_MM of the normal line, or within 3/4 of the cloud's local spacing there where that
+is more, up to twice TANGENT_MM (`gap.local_spacing`, about 1.2 times the spacing inside a cloud,
+more at its rims: through a cloud 1.9 mm apart a line misses every point within 1 mm on a third of
+the seal). "Onto the scan" means onto the skin the scan measures: a
 quadric height field fitted by weighted least squares to the scan points around the hit (Gaussian
 width SKIN_WIDTH_MM, widened to take in SKIN_NEIGHBOURS points where the scan is coarse), so that
 the seal follows the face and not the sensor's noise or depth steps (a local moving-least-squares
@@ -36,6 +37,7 @@ import trimesh
 from scipy.ndimage import gaussian_filter1d, median_filter
 from scipy.spatial import cKDTree
 
+from ..align.nonrigid import NonrigidParams
 from ..crop import reachable
 from ..evaluation.gap import local_spacing
 from ..frozen import freeze_arrays
@@ -44,8 +46,8 @@ from ..template import Template, load_template
 SAMPLES = 128  # points around the seal
 SMOOTH_SAMPLES = 2.0  # Gaussian smoothing of the edge path, in samples
 PROJECT_MM = 10.0  # no scan within this along the skin normal: no data there, keep the registered point
-TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than this (or the local spacing) is a hole's rim
-OFFSET_MM = 5.0  # a seal point this far from the registered face along its normal has met another surface (NonrigidParams.max_distance_mm)
+TANGENT_MM = 1.0  # point clouds: a closest scan point farther sideways than this (or 3/4 of the local spacing, up to twice this) is a hole's rim
+OFFSET_MM = NonrigidParams().max_distance_mm  # a seal point this far from the registered face along its normal has met another surface
 SKIN_WIDTH_MM = 2.0  # Gaussian width of the local skin fit; scan points within twice this take part
 FADE_MM = 10.0  # arc length over which the scan's offset fades into a gap in the data
 SKIN_MIN_POINTS = 12  # fewer scan points than this around a seal point (a sparse mesh): keep its closest point
@@ -117,7 +119,8 @@ def transfer_contact(template: Template, warped: np.ndarray, surface: trimesh.Tr
 
 def onto_scan(points: np.ndarray, normals: np.ndarray, surface: trimesh.Trimesh | trimesh.PointCloud) -> tuple[np.ndarray, np.ndarray]:
     """The (K, 3) points moved along their (K, 3) unit normals onto the skin the scan measures
-    (`scan_surface`), and (K,) which moved: those with scan data within PROJECT_MM along the normal."""
+    (`scan_surface`), and (K,) which moved: those with scan data within PROJECT_MM along the normal
+    whose skin there lies at most OFFSET_MM from them."""
     if isinstance(surface, trimesh.PointCloud):
         hit, near = _closest_along(points, normals, surface.kdtree)
         sample, facing = surface.vertices, None
@@ -192,11 +195,11 @@ def _hit_along(points: np.ndarray, normals: np.ndarray, mesh: trimesh.Trimesh, w
 def _closest_along(points: np.ndarray, normals: np.ndarray, cloud: cKDTree) -> tuple[np.ndarray, np.ndarray]:
     """(K, 3) where each point's normal line passes the cloud: level with the cloud point nearest the
     point along the line among those within TANGENT_MM of it and PROJECT_MM of the point (a ray cast
-    at a cloud; `local_skin` then puts it on the skin there; the cloud's local spacing there instead
-    of TANGENT_MM where it is more), and (K,) whether there is one (where not, the point itself).
+    at a cloud; `local_skin` then puts it on the skin there; 3/4 of the cloud's local spacing there
+    instead of TANGENT_MM where it is more, up to twice TANGENT_MM), and (K,) whether there is one (where not, the point itself).
     `cloud`: the cloud's k-d tree (the surface's own, built once)."""
     hit, near = points.copy(), np.zeros(len(points), dtype=bool)
-    reach = np.maximum(TANGENT_MM, local_spacing(cloud, points))
+    reach = np.clip(0.75 * local_spacing(cloud, points), TANGENT_MM, 2.0 * TANGENT_MM)
     for k, around in enumerate(cloud.query_ball_point(points, PROJECT_MM)):  # each list ascending
         offset = cloud.data[np.asarray(around, dtype=np.int64)] - points[k]
         along = offset @ normals[k]

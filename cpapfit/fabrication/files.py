@@ -17,7 +17,8 @@ from ..thresholds import WALL_TOLERANCE, ZERO_AREA_MM2
 
 
 WELD_MM = 1e-5  # a part's vertices this close once rounded to float32 are merged (manifold3d simplify)
-WELD_GROWTH = 10.0  # each further weld merges vertices this many times farther apart (at most 1e-3 mm: far under a printer's resolution)
+WELD_GROWTH = 10.0  # each further weld merges vertices this many times farther apart,
+WELD_MAX_MM = 1e-3  # up to this (far under a printer's resolution)
 PINCH_MM = 0.2  # where two sheets of a part touch along an edge, a bar this wide is cut out along it so that they part
 CLEAN_PASSES = 3  # welds (and pinch cuts) a part gets at most to be clean as written
 SLIVER_MM3 = 0.1  # a piece of a part smaller than this is a boolean's sliver, not material
@@ -124,8 +125,8 @@ def clean_as_written(part: manifold3d.Manifold) -> trimesh.Trimesh:
     can leave two vertices one float32 step apart, or a sliver whose edges are a few steps long:
     3e-5 mm on a mould of an ICT head, which a weld at WELD_MM keeps) or two sheets touching along
     an edge (an edge of the file in four triangles: a bar PINCH_MM across is cut out along it
-    first), at most CLEAN_PASSES times, each weld WELD_GROWTH times wider than the last; what is
-    left the check at writing refuses."""
+    first), at most CLEAN_PASSES times, each weld WELD_GROWTH times wider than the last, up to
+    WELD_MAX_MM; what is left the check at writing refuses."""
     welded = _welded(part, WELD_MM)
     corners = PINCH_MM / 2 * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
     for attempt in range(1, CLEAN_PASSES + 1):
@@ -134,7 +135,7 @@ def clean_as_written(part: manifold3d.Manifold) -> trimesh.Trimesh:
             break
         for ends in written.vertices[unpaired_edges(written)]:  # (2, 3) each
             welded = welded - manifold3d.Manifold.hull_points((ends[:, None] + corners).reshape(-1, 3))
-        welded = _welded(welded, WELD_MM * WELD_GROWTH**attempt)
+        welded = _welded(welded, min(WELD_MM * WELD_GROWTH**attempt, WELD_MAX_MM))
     return to_trimesh(welded)
 
 
