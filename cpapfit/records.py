@@ -15,10 +15,12 @@ from .evaluation.membrane import BAND_MM, LARGE, LIFT, MEMBRANE_MAX_MM, ROOT_MM,
 from .evaluation.states import AWAKE
 from .fabrication.frame import BORE_MM, CONE_MM, CONE_TAPER, GAUGE_PLANE_MM, VALVE_MM, cone_diameter_mm
 from .io.landmarks import landmarks_record
+from .align.nonrigid import Registration
 from .pipeline import Alignment, Design
 from .scan import Scan
 from .schemas import SCHEMA_VERSION
 from .stock_fit import StockComparison
+from .template import load_template
 from .thresholds import DEAD_SPACE_LIMIT_ML, MAX_BELOW_MIN, MAX_UNDERCUT, MIN_DRAFT_DEG
 
 
@@ -112,6 +114,16 @@ def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
     return row | ({"error": error} if error else {})
 
 
+def other_start(reg: Registration, mask: str) -> dict:
+    """The registration's other run against the one kept: `start_product` (`Registration.start_product`)
+    and `other_start_band_mm`, the mean distance (mm) between the two runs' `mask` contact bands
+    (both null with one start)."""
+    if reg.other_run is None:
+        return {"start_product": None, "other_start_band_mm": None}
+    apart = reg.other_run_apart_mm(load_template().regions[mask].band)
+    return {"start_product": round(float(reg.start_product), 4), "other_start_band_mm": round(apart, 3)}
+
+
 def design_record(d: Design, scan: Scan) -> dict:
     """fit.json of `cpapfit design`."""
     reg = d.registration
@@ -126,7 +138,8 @@ def design_record(d: Design, scan: Scan) -> dict:
                          "residual_median_mm": float(np.median(reg.residual[reg.valid])),
                          "landmark_weight_factor": reg.landmark_factor, "start": reg.start,
                          "bending_mm2": round(reg.bending, 3),
-                         "landmark_spread_mm": None if np.isnan(reg.landmark_spread_mm) else round(reg.landmark_spread_mm, 3)},
+                         "landmark_spread_mm": None if np.isnan(reg.landmark_spread_mm) else round(reg.landmark_spread_mm, 3),
+                         **other_start(reg, d.contact.mask)},
         "seal_on_scan_fraction": float(d.contact.on_scan.mean()),
         "cushion": {**mask_dimensions(d), **d.checks},
         "fit_before_compression": d.rim.summary(),

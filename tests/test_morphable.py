@@ -70,6 +70,7 @@ def test_an_ict_face_registers_from_the_morphable_start(ict_capture):
     assert _error(reg.vertices, truth) < 0.8
     assert reg.start == "morphable" and reg.bending < without.bending
     assert np.nanmean(reg.residual[reg.valid]) < np.nanmean(without.residual[without.valid])
+    assert np.array_equal(reg.other_run, without.vertices) and reg.start_product < 0.9  # the run not kept, as fit.json reports it
 
 
 @pytest.mark.shared
@@ -91,9 +92,11 @@ def test_a_run_that_bends_a_little_less_and_lies_closer_is_kept(shared_data, tmp
 
 def test_a_template_subject_keeps_the_affine_start(tmp_path):
     """A subject made from the template: the model's shape explains it no better than the template's
-    own, so the registration is the affine start's run, vertex for vertex."""
+    own, so the registration is the affine start's run, vertex for vertex; the morphable start's run,
+    kept beside it, lies within 3 mm of it (mean)."""
     scan = _capture(make_phantom(4, pose=FRAMED), tmp_path / "capture")
     al = align(scan)
     reg = register_template(scan, al)
-    assert reg.start == "affine"
+    assert reg.start == "affine" and reg.start_product >= 0.9
     assert np.array_equal(reg.vertices, register_template(scan, al, replace(NonrigidParams(), morphable=None)).vertices)
+    assert 0.0 < np.linalg.norm(reg.other_run - reg.vertices, axis=1).mean() < 3.0

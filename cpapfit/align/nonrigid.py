@@ -116,7 +116,10 @@ class Registration:
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
     landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
     start, how far the face had to bend away from the start's shape; start: the run kept, "affine"
-    or "morphable" (the template's shape fitted within real faces').
+    or "morphable" (the template's shape fitted within real faces'); other_run: (n, 3) the other
+    start's run's vertices (None with one start), how far the choice moves the face;
+    start_product: the morphable run's bending times mean pair distance over the affine run's
+    (`clearly_better`: the morphable run is kept under 1 - margin; NaN with one start).
     """
 
     vertices: np.ndarray
@@ -127,9 +130,16 @@ class Registration:
     landmark_spread_mm: float = np.nan
     bending: float = np.nan
     start: str = "affine"
+    other_run: np.ndarray | None = None
+    start_product: float = np.nan
 
     def __post_init__(self):
         freeze_arrays(self)
+
+    def other_run_apart_mm(self, vertices: np.ndarray) -> float:
+        """Mean distance (mm) between the kept and the other run at the (K,) template vertex indices
+        `vertices` (a contact band); NaN with one start."""
+        return np.nan if self.other_run is None else float(np.linalg.norm(self.vertices[vertices] - self.other_run[vertices], axis=1).mean())
 
 
 def incidence(n_vertices: int, faces: np.ndarray) -> csr_matrix:
@@ -157,13 +167,15 @@ def register(
     lm_index, lm_target = _landmark_targets(landmarks, params)
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     runs = _runs(aligned, faces, scan, (lm_index, lm_target), factor, params, mirror, basis)  # one target, the same landmarks
-    if len(runs) > 1 and clearly_better(runs[1][1], runs[0][1], params.morphable.margin):
-        setup, first = runs[1][0], replace(runs[1][1], start="morphable")
-    else:
-        setup, first = runs[0]
+    kept = int(len(runs) > 1 and clearly_better(runs[1][1], runs[0][1], params.morphable.margin))
+    setup, first = runs[kept][0], replace(runs[kept][1], start=("affine", "morphable")[kept])
+    if len(runs) > 1:
+        other = runs[1 - kept][1]
+        first = replace(first, other_run=other.vertices, start_product=_product(runs[1][1]) / _product(runs[0][1]))
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        return replace(_register(aligned, faces, setup, (lm_index, lm_target), 1.0, params), landmark_spread_mm=spread, start=first.start)
+        again = _register(aligned, faces, setup, (lm_index, lm_target), 1.0, params)
+        return replace(again, landmark_spread_mm=spread, start=first.start, other_run=first.other_run, start_product=first.start_product)
     return replace(first, landmark_spread_mm=spread)
 
 
@@ -173,7 +185,12 @@ def clearly_better(run: Registration, other: Registration, margin: float) -> boo
     under 1 - `margin`. A run that bends 8 % less and lies 7 % closer is clearly better (the affine
     start's run of one ICT face slid 2.6 mm along the skin); one that bends less but misses the scan
     by as much more is not."""
-    return run.bending * _mean_distance(run) < (1.0 - margin) * other.bending * _mean_distance(other)
+    return _product(run) < (1.0 - margin) * _product(other)
+
+
+def _product(reg: Registration) -> float:
+    """A run's bending (mm^2) times its mean pair distance (mm): the two terms `clearly_better` weighs."""
+    return reg.bending * _mean_distance(reg)
 
 
 def _mean_distance(reg: Registration) -> float:

@@ -10,6 +10,7 @@ import numpy as np
 from matplotlib import colormaps
 
 from .. import __version__
+from ..align.morphable import MorphableParams
 from ..align.nonrigid import Registration
 from ..cushion.contact import Contact
 from ..evaluation.fit import CushionFit
@@ -129,6 +130,20 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
     ]
 
 
+CUT = 1.0 - MorphableParams().margin  # `nonrigid.clearly_better`
+
+
+def _other_start(reg: Registration, mask: str) -> str:
+    """A caption's sentence on how far the registration's other start put the contact band ("" with one start)."""
+    apart = reg.other_run_apart_mm(load_template().regions[mask].band)
+    if np.isnan(apart):
+        return ""
+    return (f" The template fitted from its other start put the contact band {apart:.1f} mm (mean) from this one. The "
+            "morphable start's fit is kept when its bending times its distance from the scan is under "
+            f"{CUT:g} of the affine start's; here {reg.start_product:.2f}. Near {CUT:g} another scan of this face may keep the other fit, and the "
+            "seal then lies that much further along the skin.")
+
+
 def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, frame: Face, face: Face, whole, close,
                     scene: Scene) -> list[Picture]:
     """The scan understood: landmarks, registration residual, contact curve, cushion and assembled mask on the face
@@ -147,7 +162,7 @@ def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion:
                                      f"residual median {np.median(res):.2f} mm, 95th percentile {np.percentile(res, 95):.2f} mm")),
         Picture("contact_curve.png", "Where the cushion touches the face",
                 "The seal line carried from the template onto this face. Red stretches have no scan data under them; "
-                "the cushion follows the template there.",
+                "the cushion follows the template there." + _other_start(reg, contact.mask),
                 pic.contact_picture((whole, close), contact.curve, contact.on_scan)),
         Picture("cushion_on_face.png", "The custom cushion on the face",
                 "The printable cushion (blue) as designed on the scan.",
