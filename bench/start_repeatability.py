@@ -115,6 +115,8 @@ def rendered_scans(path: Path):
 
 
 def main() -> None:
+    if sys.argv[1:2] == ["--scan"] and len(sys.argv) != 3:
+        sys.exit("usage: start_repeatability.py --scan FILE")
     scans = rendered_scans(Path(sys.argv[2])) if sys.argv[1:2] == ["--scan"] else sweep_scans(sys.argv[1:] or DEFAULT)
     bands, reference = {}, None
     for name, scan, pose in scans:

@@ -80,7 +80,7 @@ def registration_summary(reg) -> str:
     return (
         f"{len(reg.log)} iterations, {int(reg.valid.sum())} of {len(reg.valid)} template vertices matched, "
         f"residual median {np.median(res):.2f} mm, p95 {np.percentile(res, 95):.2f} mm (final membrane weight {last.membrane:g}), "
-        f"the {reg.start} start's run kept" + ("" if np.isnan(reg.start_product) else f" (product {reg.start_product:.2f})")
+        f"the {reg.start} start's run kept" + (f" (product {reg.start_product:.3f})" if np.isfinite(reg.start_product) else "")
     )
 
 

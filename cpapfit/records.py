@@ -117,11 +117,12 @@ def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
 def other_start(reg: Registration, mask: str) -> dict:
     """The registration's other run against the one kept: `start_product` (`Registration.start_product`)
     and `other_start_band_mm`, the mean distance (mm) between the two runs' `mask` contact bands
-    (both null with one start)."""
+    (both null with one start; the product null where a run found no pairs)."""
     if reg.other_run is None:
         return {"start_product": None, "other_start_band_mm": None}
     apart = reg.other_run_apart_mm(load_template().regions[mask].band)
-    return {"start_product": round(float(reg.start_product), 4), "other_start_band_mm": round(apart, 3)}
+    product = round(float(reg.start_product), 4) if np.isfinite(reg.start_product) else None  # a run without pairs
+    return {"start_product": product, "other_start_band_mm": round(apart, 3)}
 
 
 def design_record(d: Design, scan: Scan) -> dict:

@@ -16,6 +16,7 @@ from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, 
 from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
 from cpapfit.report.pictures import OPEN_RGB, rim_image
 from cpapfit.loops import longest_run, loop_lengths
+from cpapfit.template import load_template
 
 from browser import CHROMIUM, Chromium
 
@@ -240,3 +241,17 @@ def test_a_dense_crop_reaches_the_decimator_thinned(monkeypatch):
         viewer.viewer_face(Face(np.array(sphere.vertices), np.array(sphere.faces, dtype=np.int64)), np.zeros(3), 200.0, most)
     assert viewer.CLUSTERED * 1000 <= handed[0] <= 2.5 * viewer.CLUSTERED * 1000
     assert handed[1] == 1280
+
+
+def test_the_other_starts_contact_band_is_recorded_and_told(designed1, report):
+    """Seed 1 (template-made) keeps its affine start's run; fit.json gives the product over the cut and
+    how far the morphable start's run put the nasal contact band (the two runs' bands, measured here),
+    and the contact-curve caption says the same to 0.1 mm."""
+    _, d = designed1
+    _, files, fit, _ = report
+    reg, band = d.registration, load_template().regions["nasal"].band
+    apart = np.linalg.norm(reg.vertices[band] - reg.other_run[band], axis=1).mean()
+    record = fit["registration"]
+    assert record["start"] == "affine" and record["start_product"] >= 0.9
+    assert 0.05 < apart < 3.0 and record["other_start_band_mm"] == pytest.approx(apart, abs=1e-3)
+    assert f"put the contact band {apart:.1f} mm (mean) from this one" in files["report.html"].decode()

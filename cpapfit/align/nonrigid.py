@@ -118,8 +118,9 @@ class Registration:
     start, how far the face had to bend away from the start's shape; start: the run kept, "affine"
     or "morphable" (the template's shape fitted within real faces'); other_run: (n, 3) the other
     start's run's vertices (None with one start), how far the choice moves the face;
-    start_product: the morphable run's bending times mean pair distance over the affine run's
-    (`clearly_better`: the morphable run is kept under 1 - margin; NaN with one start).
+    start_product: the morphable run's bending times mean pair distance over the affine run's, and
+    start_cut: the cut it is held to (`clearly_better`: the morphable run is kept under 1 - margin);
+    both NaN with one start. A trusted landmarks file registers both runs again at its weight.
     """
 
     vertices: np.ndarray
@@ -132,6 +133,7 @@ class Registration:
     start: str = "affine"
     other_run: np.ndarray | None = None
     start_product: float = np.nan
+    start_cut: float = np.nan
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -170,12 +172,15 @@ def register(
     kept = int(len(runs) > 1 and clearly_better(runs[1][1], runs[0][1], params.morphable.margin))
     setup, first = runs[kept][0], replace(runs[kept][1], start=("affine", "morphable")[kept])
     if len(runs) > 1:
-        other = runs[1 - kept][1]
-        first = replace(first, other_run=other.vertices, start_product=_product(runs[1][1]) / _product(runs[0][1]))
+        product = _product(runs[1][1]) / _product(runs[0][1])
+        first = replace(first, other_run=runs[1 - kept][1].vertices, start_product=product, start_cut=1.0 - params.morphable.margin)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        again = _register(aligned, faces, setup, (lm_index, lm_target), 1.0, params)
-        return replace(again, landmark_spread_mm=spread, start=first.start, other_run=first.other_run, start_product=first.start_product)
+        trusted = (lm_index, lm_target)
+        again = _register(aligned, faces, setup, trusted, 1.0, params)
+        other = _register(aligned, faces, runs[1 - kept][0], trusted, 1.0, params).vertices if len(runs) > 1 else None
+        return replace(again, landmark_spread_mm=spread, start=first.start, other_run=other, start_product=first.start_product,
+                       start_cut=first.start_cut)
     return replace(first, landmark_spread_mm=spread)
 
 

@@ -10,7 +10,6 @@ import numpy as np
 from matplotlib import colormaps
 
 from .. import __version__
-from ..align.morphable import MorphableParams
 from ..align.nonrigid import Registration
 from ..cushion.contact import Contact
 from ..evaluation.fit import CushionFit
@@ -130,18 +129,15 @@ def pressure_pictures(shot, similarity, mask: str, rims: dict, window_kpa: tuple
     ]
 
 
-CUT = 1.0 - MorphableParams().margin  # `nonrigid.clearly_better`
-
-
 def _other_start(reg: Registration, mask: str) -> str:
-    """A caption's sentence on how far the registration's other start put the contact band ("" with one start)."""
+    """A caption's sentences on how far the registration's other start put the contact band ("" with one start)."""
     apart = reg.other_run_apart_mm(load_template().regions[mask].band)
     if np.isnan(apart):
         return ""
-    return (f" The template fitted from its other start put the contact band {apart:.1f} mm (mean) from this one. The "
-            "morphable start's fit is kept when its bending times its distance from the scan is under "
-            f"{CUT:g} of the affine start's; here {reg.start_product:.2f}. Near {CUT:g} another scan of this face may keep the other fit, and the "
-            "seal then lies that much further along the skin.")
+    chose = (f" The morphable start's fit is kept when its bending times its distance from the scan is under {reg.start_cut:g} "
+             f"of the affine start's; here {reg.start_product:.3f}. The nearer the cut, the likelier another scan of this face "
+             "keeps the other fit, and the seal then lies that much further along the skin." if np.isfinite(reg.start_product) else "")
+    return f" The template fitted from its other start put the contact band {apart:.1f} mm (mean) from this one." + chose
 
 
 def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, frame: Face, face: Face, whole, close,
