@@ -121,8 +121,8 @@ def main() -> None:
     bands, reference = {}, None
     for name, scan, pose in scans:
         kept, runs = runs_of(scan)
-        a, m = runs["affine"], runs["morphable"]
-        ratio = m.bending * nr._mean_distance(m) / (a.bending * nr._mean_distance(a))
+        a = runs["affine"]
+        ratio = nr._product(runs["morphable"]) / nr._product(a)
         rmse = 0.0
         if reference is None:
             reference, first = (name, scan, a.vertices[BAND]), a.vertices
