@@ -1,7 +1,8 @@
-"""Which elastic ICP run the registration keeps: both runs (from the affine and from the morphable
-start) on subjects with a truth, each run's bending (|L D|^2 from its start), mean pair distance
-from the scan, and its contact bands' mean distance from their true places (mm), one JSON line per
-subject. ICT subjects (all 100 modes of ../shared's model) as framed captures or head meshes,
+"""What the registration makes of its two elastic ICP runs: both runs (from the affine and from the
+morphable start) on subjects with a truth, each run's bending (|L D|^2 from its start), mean pair
+distance from the scan and contact bands' mean distance from their true places (mm), and the
+registration made of them (one run, or the two blended: `nonrigid.morphable_share`), one JSON line
+per subject. ICT subjects (all 100 modes of ../shared's model) as framed captures or head meshes,
 template-made subjects as captures (any pose).
 
 Usage: .venv/bin/python bench/registration_starts.py capture:9001 mesh:9000 template:0 ...
@@ -34,8 +35,8 @@ def template_subject(seed: int):
         return load_scan(Path(tmp)), ph.surface
 
 
-def runs_of(scan) -> tuple[str, dict]:
-    """The start `register_template` keeps on `scan` and both its elastic runs (`Registration`), by start."""
+def runs_of(scan) -> tuple:
+    """The registration `register_template` makes of `scan` and both its elastic runs (`Registration`), by start."""
     got = {}
     runs = nr._runs
 
@@ -46,18 +47,20 @@ def runs_of(scan) -> tuple[str, dict]:
 
     nr._runs = spy
     try:
-        kept = register_template(scan, align(scan)).start
+        kept = register_template(scan, align(scan))
     finally:
         nr._runs = runs
     return kept, got
 
 
 def both_runs(scan, truth) -> dict:
-    """Each start's run on `scan` (its figures, mm) and the start kept."""
+    """Each start's run on `scan` and the registration made of them (its figures, mm; the product and
+    the morphable run's share in it)."""
     kept, runs = runs_of(scan)
-    return {name: {"bending": reg.bending, "distance_mm": nr._mean_distance(reg),
-                   **{m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}}
-            for name, reg in runs.items()} | {"kept": kept}
+    bands = {name: {m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}
+             for name, reg in runs.items() | {"kept": kept}.items()}
+    return {name: {"bending": reg.bending, "distance_mm": nr._mean_distance(reg), **bands[name]} for name, reg in runs.items()} | {
+        "kept": {"start": kept.start, "product": kept.start_product, "morphable_share": kept.morphable_share, **bands["kept"]}}
 
 
 def main() -> None:

@@ -1,9 +1,10 @@
 """How repeatable each registration run is on one real face: several scans of it, both elastic runs
 of each (from the affine and from the morphable start, `registration_starts.runs_of`), all brought
 into one frame, and the runs' seal bands (both masks') compared there: each scan's bands against
-the first scan's, and for each run (affine, morphable, the one `register_template` keeps; a design
-may register again without landmarks it drops) the mean distance (mm) between the same template
-vertices of two scans' bands, over every pair of scans. No truth: a run that lands in the same
+the first scan's, and for each run (affine, morphable) and the registration `register_template`
+makes of them ("kept": one run or a blend; a design may register again without landmarks it
+drops) the mean distance (mm) between the same template vertices of two scans' bands, over every
+pair of scans. No truth: a run that lands in the same
 place on every scan of a face is repeatable, not necessarily right.
 
 The scans: the shared mannequin sweep's (../shared/data/truedepth_sweep_mannequin), each "A-B"
@@ -128,10 +129,10 @@ def main() -> None:
             reference, first = (name, scan, a.vertices[BAND]), a.vertices
         if pose is None:
             pose, rmse = (np.eye(4), 0.0) if name == reference[0] else onto(scan, kabsch(a.vertices, first), reference[1:])
-        placed = {run: reg.vertices[BAND] @ pose[:3, :3].T + pose[:3, 3] for run, reg in runs.items()}
-        bands[name] = placed | {"kept": placed[kept]}
+        placed = {run: reg.vertices[BAND] @ pose[:3, :3].T + pose[:3, 3] for run, reg in (runs | {"kept": kept}).items()}
+        bands[name] = placed
         first_bands = bands[reference[0]]
-        print(f"{name}: kept {kept}, bending x distance {ratio:.3f}, runs' bands "
+        print(f"{name}: morphable share {kept.morphable_share:.2f}, bending x distance {ratio:.3f}, runs' bands "
               f"{np.linalg.norm(placed['affine'] - placed['morphable'], axis=1).mean():.2f} mm apart, from "
               f"{reference[0]}'s: affine {np.linalg.norm(placed['affine'] - first_bands['affine'], axis=1).mean():.2f}, "
               f"morphable {np.linalg.norm(placed['morphable'] - first_bands['morphable'], axis=1).mean():.2f} mm"

@@ -80,7 +80,8 @@ def registration_summary(reg) -> str:
     return (
         f"{len(reg.log)} iterations, {int(reg.valid.sum())} of {len(reg.valid)} template vertices matched, "
         f"residual median {np.median(res):.2f} mm, p95 {np.percentile(res, 95):.2f} mm (final membrane weight {last.membrane:g}), "
-        f"the {reg.start} start's run kept" + (f" (product {reg.start_product:.3f})" if np.isfinite(reg.start_product) else "")
+        + (f"the morphable start's run weighs {100 * reg.morphable_share:.0f} %, the affine start's {100 - 100 * reg.morphable_share:.0f} %"
+           f" (product {reg.start_product:.3f})" if reg.other_run is not None else f"the {reg.start} start's run")
     )
 
 

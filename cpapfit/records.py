@@ -116,8 +116,9 @@ def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
 
 def other_start(reg: Registration, mask: str) -> dict:
     """The registration's other run against the one kept: `start_product` (`Registration.start_product`)
-    and `other_start_band_mm`, the mean distance (mm) between the two runs' `mask` contact bands
-    (both null with one start; the product null where a run found no pairs)."""
+    and `other_start_band_mm`, the mean distance (mm) between the `mask` contact bands of the
+    registration and of the run that weighs less in it (both null with one start; the product null
+    where a run found no pairs)."""
     if reg.other_run is None:
         return {"start_product": None, "other_start_band_mm": None}
     apart = reg.other_run_apart_mm(load_template().regions[mask].band)
@@ -138,7 +139,7 @@ def design_record(d: Design, scan: Scan) -> dict:
         "registration": {"iterations": len(reg.log), "matched_vertices": int(reg.valid.sum()),
                          "residual_median_mm": float(np.median(reg.residual[reg.valid])),
                          "landmark_weight_factor": reg.landmark_factor, "start": reg.start,
-                         "bending_mm2": round(reg.bending, 3),
+                         "morphable_share": round(reg.morphable_share, 4), "bending_mm2": round(reg.bending, 3),
                          "landmark_spread_mm": None if np.isnan(reg.landmark_spread_mm) else round(reg.landmark_spread_mm, 3),
                          **other_start(reg, d.contact.mask)},
         "seal_on_scan_fraction": float(d.contact.on_scan.mean()),

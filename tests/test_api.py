@@ -21,7 +21,7 @@ def test_the_python_quick_start_designs_and_saves_files_that_follow_the_schemas(
     result = nasal1  # cpapfit.design(cpapfit.load_scan(subject), mask="nasal", params=cpapfit.Params(stock="gauge"))
     folder = result.save(tmp_path / "out")
     fit = written(folder / "fit.json")
-    assert fit == result.fit and fit["schema_version"] == 2 and result.quality["rescan_advised"] == fit["rescan_advised"]
+    assert fit == result.fit and fit["schema_version"] == 3 and result.quality["rescan_advised"] == fit["rescan_advised"]
     assert fit["custom"]["leak_l_min"] <= 1.0 and fit["stock_fitting"]["size"] == fit["stock_fitting"]["gauge_size"]
     curve = written(folder / "contact_curve.json")
     assert np.allclose(curve["points"], result.design.contact.curve, atol=1e-4)  # mm, as designed

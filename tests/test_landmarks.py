@@ -565,7 +565,8 @@ def test_doubtful_landmarks_are_checked_against_the_shape_alone(tmp_path):
 
 def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape(tmp_path):
     """Turned another way, subject 9's render gives landmarks that put the oronasal seal region 23 mm
-    from the truth, the shape alone 1.2 mm. Their spread was 8.8 mm and the seal regions over 10 mm
+    from the truth, the shape alone 1.6 mm (its two runs blended, 77 % morphable; the affine run
+    alone 1.2 mm). Their spread was 8.8 mm and the seal regions over 10 mm
     apart; with the mirror term the face registered at their tenth weight lies nearer the truth and
     the spread alone, 13.7 mm, is past 10 mm. Either way the design (and the landmarks command, which
     writes what a design uses) takes the shape's placement, flagged landmark-free and saying why."""
@@ -577,7 +578,7 @@ def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape
     al = placed.alignment
     assert al.landmarks.path == "fallback" and placed.by_shape is None
     assert "from their places on the registered face" in al.landmarks.rejected or "placed the mask region a mean" in al.landmarks.rejected
-    assert np.linalg.norm(placed.registration.vertices[band] - truth[band], axis=1).mean() < 1.5
+    assert np.linalg.norm(placed.registration.vertices[band] - truth[band], axis=1).mean() < 1.7
     (gate,) = [g for g in assessed(scan, "oronasal", placed).quality.flags if g.code == "landmark_free"]
     assert "shape alone" in gate.message
 

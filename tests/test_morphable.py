@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.align.correspondences import make_target, oriented
 from cpapfit.align.morphable import fit_shape
-from cpapfit.align.nonrigid import NonrigidParams, vertex_normals
+from cpapfit.align.nonrigid import NonrigidParams, morphable_share, vertex_normals
 from cpapfit.similarity import fit_similarity
 from cpapfit.ict import ict_face, load_ict, template_truth
 from cpapfit.synthetic.ict_phantom import make_ict_phantom
@@ -90,13 +90,29 @@ def test_a_run_that_bends_a_little_less_and_lies_closer_is_kept(shared_data, tmp
     assert np.linalg.norm(affine.vertices[band] - ph.surface[band], axis=1).mean() > 2.0
 
 
-def test_a_template_subject_keeps_the_affine_start(tmp_path):
+def test_a_template_subject_weighs_the_affine_start(tmp_path):
     """A subject made from the template: the model's shape explains it no better than the template's
-    own, so the registration is the affine start's run, vertex for vertex; the morphable start's run,
-    kept beside it, lies within 3 mm of it (mean)."""
+    own (product 1.0-1.1), so the registration is the affine start's run with at most a fifth of the
+    morphable start's blended in, vertex for vertex, the morphable run within 3 mm of it (mean)."""
     scan = _capture(make_phantom(4, pose=FRAMED), tmp_path / "capture")
     al = align(scan)
     reg = register_template(scan, al)
-    assert reg.start == "affine" and reg.start_product >= 0.9
-    assert np.array_equal(reg.vertices, register_template(scan, al, replace(NonrigidParams(), morphable=None)).vertices)
-    assert 0.0 < np.linalg.norm(reg.other_run - reg.vertices, axis=1).mean() < 3.0
+    affine = register_template(scan, al, replace(NonrigidParams(), morphable=None)).vertices
+    share = morphable_share(reg.start_product, NonrigidParams().morphable.blend)
+    assert reg.start == "affine" and 1.0 <= reg.start_product <= 1.1 and reg.morphable_share == share <= 0.2
+    assert np.allclose(reg.vertices, share * reg.other_run + (1.0 - share) * affine, atol=1e-9)
+    assert 0.0 < np.linalg.norm(reg.other_run - affine, axis=1).mean() < 3.0
+    assert np.isfinite(reg.residual[reg.valid]).all() and reg.valid.mean() > 0.5  # the blend matched to the scan again
+
+
+def test_the_morphable_share_eases_between_the_blend_bounds():
+    """The share is whole under the blend's low bound and none over its high one, half between them,
+    falls monotonically and without a step (a product 0.01 further moves it at most 0.06), and is
+    none where neither run paired (a product not a number)."""
+    blend = (0.85, 1.1)
+    products = np.linspace(0.5, 1.5, 1001)
+    share = np.array([morphable_share(p, blend) for p in products])
+    assert share[products <= 0.85].min() == 1.0 and share[products >= 1.1].max() == 0.0
+    assert morphable_share(0.975, blend) == pytest.approx(0.5)
+    assert np.all(np.diff(share) <= 0.0) and np.abs(np.diff(share)).max() <= 0.0061
+    assert morphable_share(np.nan, blend) == 0.0 and morphable_share(np.inf, blend) == 0.0

@@ -36,10 +36,10 @@ class MorphableParams:
     used (at most the shipped model's); prior_mm: the residual (mm) that one unit of a mode's prior
     weighs against, per pair (larger: the prior counts more); stride: every stride-th template
     vertex is paired (47 unknowns need no 29 000 pairs); converged: the ICP stops when no unknown
-    moves more than this (coefficients, radians, mm); margin: the elastic ICP keeps the morphable
-    start's run only if its bending and its mean pair distance, each as a share of the affine start's
-    run's, multiply to this fraction less than 1 (`nonrigid.clearly_better`; ICT captures 9001-9019:
-    15-69 % less; template subjects 0-19: 2 % less to 34 % more)."""
+    moves more than this (coefficients, radians, mm); blend: the products (the morphable start's
+    run's bending and mean pair distance, each as a share of the affine start's run's, multiplied)
+    under whose first the morphable run is kept, over whose second the affine one, and between
+    which the two are blended (`nonrigid.morphable_share`)."""
 
     iterations: int = 40
     trim: float = 0.9
@@ -47,7 +47,7 @@ class MorphableParams:
     prior_mm: float = 1.0
     stride: int = 4
     converged: float = 1e-3
-    margin: float = 0.1
+    blend: tuple[float, float] = (0.85, 1.1)
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,12 @@ the scan's own plane of symmetry, lies on itself, at `symmetry` per vertex pair 
 membrane, so that the template's midline is the face's and an unseen part of the face takes the
 shape of the side seen, while the skin is free to be asymmetric once the membrane is soft. And a
 morphable start (align/morphable.py: the template's shape fitted within real faces' identity modes,
-begun at the similarity): the elastic ICP runs from it too and keeps that run if it is clearly
-better over both its terms (`clearly_better`): its bending from its start and its mean distance
-from the scan, each as a share of the affine start's run's, multiply to `MorphableParams.margin`
-under 1, the face then being more like the model's faces than the template's. With all six off
+begun at the similarity): the elastic ICP runs from it too, and the two runs' bending from their
+starts and mean distances from the scan, each the morphable run's as a share of the affine run's,
+multiply to a product that weighs them (`morphable_share`): well under 1 the face is more like the
+model's faces than the template's and the morphable run is kept, near 1 or over it the affine
+run, and between `MorphableParams.blend`'s bounds the two runs are blended, so that two scans of
+one face reading products either side of a cut do not put its seal two runs apart. With all six off
 (`affine=None`, `detected_landmark_factor=1`, `user_trust_mm=inf`, `coarse_gates=None`,
 `symmetry=0`, `morphable=None`) this is the paper's method.
 
@@ -115,12 +117,14 @@ class Registration:
     landmark_factor: the share of the paper's landmark weight used; landmark_spread_mm: median distance
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
     landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
-    start, how far the face had to bend away from the start's shape; start: the run kept, "affine"
-    or "morphable" (the template's shape fitted within real faces'); other_run: (n, 3) the other
-    start's run's vertices (None with one start), how far the choice moves the face;
-    start_product: the morphable run's bending times mean pair distance over the affine run's, and
-    start_cut: the cut it is held to (`clearly_better`: the morphable run is kept under 1 - margin);
-    both NaN with one start. A trusted landmarks file registers both runs again at its weight.
+    start, how far the face had to bend away from the start's shape (of a blend, the runs' blended);
+    start: the run that weighs most, "affine" or "morphable" (the template's shape fitted within
+    real faces'); morphable_share: the morphable run's share of the vertices (0-1; 0 with one
+    start); other_run: (n, 3) the vertices of the run that weighs less (None with one start), how
+    far the choice moves the face; start_product: the morphable run's bending times mean pair
+    distance over the affine run's (NaN with one start); start_blend: the products (low, high)
+    between which the runs are blended (`morphable_share`; empty with one start). A trusted
+    landmarks file registers both runs again at its weight and blends them by the same share.
     """
 
     vertices: np.ndarray
@@ -131,9 +135,10 @@ class Registration:
     landmark_spread_mm: float = np.nan
     bending: float = np.nan
     start: str = "affine"
+    morphable_share: float = 0.0
     other_run: np.ndarray | None = None
     start_product: float = np.nan
-    start_cut: float = np.nan
+    start_blend: tuple = ()
 
     def __post_init__(self):
         freeze_arrays(self)
@@ -169,38 +174,59 @@ def register(
     lm_index, lm_target = _landmark_targets(landmarks, params)
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     runs = _runs(aligned, faces, scan, (lm_index, lm_target), factor, params, mirror, basis)  # one target, the same landmarks
-    kept = int(len(runs) > 1 and clearly_better(runs[1][1], runs[0][1], params.morphable.margin))
-    setup, first = runs[kept][0], replace(runs[kept][1], start=("affine", "morphable")[kept])
-    if len(runs) > 1:
-        product = _product(runs[1][1]) / _product(runs[0][1])
-        first = replace(first, other_run=runs[1 - kept][1].vertices, start_product=product, start_cut=1.0 - params.morphable.margin)
+    product = _product(runs[1][1]) / _product(runs[0][1]) if len(runs) > 1 else np.nan
+    first = _kept(runs, product, faces, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        trusted = (lm_index, lm_target)
-        again = _register(aligned, faces, setup, trusted, 1.0, params)
-        other = _register(aligned, faces, runs[1 - kept][0], trusted, 1.0, params).vertices if len(runs) > 1 else None
-        return replace(again, landmark_spread_mm=spread, start=first.start, other_run=other, start_product=first.start_product,
-                       start_cut=first.start_cut)
+        again = [(setup, _register(aligned, faces, setup, (lm_index, lm_target), 1.0, params)) for setup, _ in runs]
+        first = _kept(again, product, faces, params)
     return replace(first, landmark_spread_mm=spread)
 
 
-def clearly_better(run: Registration, other: Registration, margin: float) -> bool:
-    """True when `run` beats `other` clearly over both terms the elastic ICP weighs: its bending from
-    its start and its mean pair distance from the scan, each as a share of `other`'s, multiply to
-    under 1 - `margin`. A run that bends 8 % less and lies 7 % closer is clearly better (the affine
-    start's run of one ICT face slid 2.6 mm along the skin); one that bends less but misses the scan
-    by as much more is not."""
-    return _product(run) < (1.0 - margin) * _product(other)
+def morphable_share(product: float, blend: tuple[float, float]) -> float:
+    """The morphable run's share (0-1) of the registration where its run's bending times mean pair
+    distance is `product` times the affine run's: 1 under blend[0], 0 over blend[1] (or where the
+    product is not a number: neither run paired), easing between them (smoothstep, continuous with
+    its slope). ICT faces, not made from the template, read 0.12-0.85 and template-made ones
+    0.93-1.34 (`bench/RESULTS.md` section 2); real faces' scans read 0.67-1.03, the same face either
+    side of any cut from scan to scan."""
+    if np.isnan(product):
+        return 0.0
+    t = float(np.clip((blend[1] - product) / (blend[1] - blend[0]), 0.0, 1.0))
+    return t * t * (3.0 - 2.0 * t)
+
+
+def _kept(runs: list, product: float, faces: np.ndarray, params: NonrigidParams) -> Registration:
+    """The registration from the elastic runs ((set-up, `Registration`) pairs, the affine start's
+    first): the one run, or the two blended by the morphable run's share (`morphable_share` of
+    `product`), re-matched to the scan where both weigh."""
+    if len(runs) == 1:
+        return runs[0][1]
+    (setup, affine), (_, morph) = runs
+    share = morphable_share(product, params.morphable.blend)
+    major, minor = (morph, affine) if share >= 0.5 else (affine, morph)
+    if 0.0 < share < 1.0:
+        vertices = share * morph.vertices + (1.0 - share) * affine.vertices
+        major = replace(major, vertices=vertices, bending=share * morph.bending + (1.0 - share) * affine.bending,
+                        **_measured(vertices, faces, setup.target, setup.vf, params))
+    return replace(major, start=("affine", "morphable")[share >= 0.5], morphable_share=share, other_run=minor.vertices,
+                   start_product=product, start_blend=params.morphable.blend)
 
 
 def _product(reg: Registration) -> float:
-    """A run's bending (mm^2) times its mean pair distance (mm): the two terms `clearly_better` weighs."""
+    """A run's bending (mm^2) times its mean pair distance (mm): the two terms `morphable_share` weighs."""
     return reg.bending * _mean_distance(reg)
 
 
 def _mean_distance(reg: Registration) -> float:
     """Mean distance (mm) of a registration's kept pairs to their tangent planes."""
     return float(np.mean(reg.residual[reg.valid])) if reg.valid.any() else np.inf
+
+
+def _measured(vertices: np.ndarray, faces: np.ndarray, target: Target, vf: csr_matrix, params: NonrigidParams) -> dict:
+    """A registration's pairs with the scan at the paper's gates: residual (n,) mm (NaN unmatched), valid (n,)."""
+    m = match(target, vertices, vertex_normals(vertices, faces, vf), params.max_distance_mm, params.max_normal_deg)
+    return {"residual": np.where(m.valid, _plane_distance(vertices, m, target), np.nan), "valid": m.valid}
 
 
 class _Setup(NamedTuple):
@@ -278,9 +304,8 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
             mu, lam = mu * params.relax_factor, lam * params.relax_factor
             system.refactor(mu, lam)
     final = start + disp
-    m = match(target, final, vertex_normals(final, faces, vf), params.max_distance_mm, params.max_normal_deg)
-    residual = np.where(m.valid, _plane_distance(final, m, target), np.nan)
-    return Registration(final, residual, m.valid, tuple(log), factor, bending=float(np.sum((lap @ disp) ** 2)))
+    return Registration(final, log=tuple(log), landmark_factor=factor, bending=float(np.sum((lap @ disp) ** 2)),
+                        **_measured(final, faces, target, vf, params))
 
 
 def _gates(params: NonrigidParams, mu: float) -> tuple[float, float]:

@@ -5,7 +5,7 @@ import json
 from functools import lru_cache
 from importlib.resources import files
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 NAMES = ("fit", "contact_curve", "landmarks", "manifest", "mask")
 
 
