@@ -58,7 +58,7 @@ def both_runs(scan, truth) -> dict:
     the morphable run's share in it)."""
     kept, runs = runs_of(scan)
     bands = {name: {m: float(np.linalg.norm(reg.vertices[b] - truth[b], axis=1).mean()) for m, b in BANDS.items()}
-             for name, reg in runs.items() | {"kept": kept}.items()}
+             for name, reg in (runs | {"kept": kept}).items()}
     return {name: {"bending": reg.bending, "distance_mm": nr._mean_distance(reg), **bands[name]} for name, reg in runs.items()} | {
         "kept": {"start": kept.start, "product": kept.start_product, "morphable_share": kept.morphable_share, **bands["kept"]}}
 
