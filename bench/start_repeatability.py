@@ -27,7 +27,6 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-import cpapfit.align.nonrigid as nr
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
@@ -123,7 +122,6 @@ def main() -> None:
     for name, scan, pose in scans:
         kept, runs = runs_of(scan)
         a = runs["affine"]
-        ratio = nr._product(runs["morphable"]) / nr._product(a)
         rmse = 0.0
         if reference is None:
             reference, first = (name, scan, a.vertices[BAND]), a.vertices
@@ -132,7 +130,7 @@ def main() -> None:
         placed = {run: reg.vertices[BAND] @ pose[:3, :3].T + pose[:3, 3] for run, reg in (runs | {"kept": kept}).items()}
         bands[name] = placed
         first_bands = bands[reference[0]]
-        print(f"{name}: morphable share {kept.morphable_share:.2f}, bending x distance {ratio:.3f}, runs' bands "
+        print(f"{name}: morphable share {kept.morphable_share:.2f}, bending x distance {kept.start_product:.3f}, runs' bands "
               f"{np.linalg.norm(placed['affine'] - placed['morphable'], axis=1).mean():.2f} mm apart, from "
               f"{reference[0]}'s: affine {np.linalg.norm(placed['affine'] - first_bands['affine'], axis=1).mean():.2f}, "
               f"morphable {np.linalg.norm(placed['morphable'] - first_bands['morphable'], axis=1).mean():.2f} mm"

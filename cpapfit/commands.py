@@ -80,9 +80,17 @@ def registration_summary(reg) -> str:
     return (
         f"{len(reg.log)} iterations, {int(reg.valid.sum())} of {len(reg.valid)} template vertices matched, "
         f"residual median {np.median(res):.2f} mm, p95 {np.percentile(res, 95):.2f} mm (final membrane weight {last.membrane:g}), "
-        + (f"the morphable start's run weighs {100 * reg.morphable_share:.0f} %, the affine start's {100 - 100 * reg.morphable_share:.0f} %"
-           f" (product {reg.start_product:.3f})" if reg.other_run is not None else f"the {reg.start} start's run")
+        + _weights(reg)
     )
+
+
+def _weights(reg) -> str:
+    """How the registration weighs its starts' runs, for `registration_summary`."""
+    if reg.other_run is None:
+        return f"the {reg.start} start's run"
+    share = 100 * reg.morphable_share
+    product = f" (product {reg.start_product:.3f})" if np.isfinite(reg.start_product) else ""
+    return f"the morphable start's run weighs {share:.0f} %, the affine start's {100 - share:.0f} %{product}"
 
 
 def cmd_register(args) -> int:

@@ -115,7 +115,7 @@ def _state_row(state, fits: dict, error: str, cpap_cmh2o: float) -> dict:
 
 
 def other_start(reg: Registration, mask: str) -> dict:
-    """The registration's other run against the one kept: `start_product` (`Registration.start_product`)
+    """The registration against the run that weighs less in it: `start_product` (`Registration.start_product`)
     and `other_start_band_mm`, the mean distance (mm) between the `mask` contact bands of the
     registration and of the run that weighs less in it (both null with one start; the product null
     where a run found no pairs)."""

@@ -1,10 +1,12 @@
 """The morphable start: the template's shape fitted within the ICT model's identity modes, and the
-elastic ICP keeping it only where the face is more like the model's faces than the template's."""
+elastic ICP's two runs weighed: the morphable one kept where the face is clearly more like the
+model's faces than the template's, the affine one where it is not, the two blended between."""
 
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from cpapfit.align.correspondences import make_target, oriented
@@ -16,6 +18,7 @@ from cpapfit.synthetic.ict_phantom import make_ict_phantom
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
+from cpapfit.landmarks.types import Landmarks
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.synthetic.camera import FRAMED
 from cpapfit.pipeline import align, register_template, template_basis
@@ -25,6 +28,7 @@ from cpapfit.template import load_template, mask_region
 TEMPLATE = load_template()
 REGION = mask_region(TEMPLATE)
 BASIS = template_basis(40)
+BLEND = NonrigidParams().morphable.blend
 
 
 def _error(vertices: np.ndarray, truth: np.ndarray) -> float:
@@ -61,7 +65,7 @@ def ict_capture(tmp_path_factory):
 def test_an_ict_face_registers_from_the_morphable_start(ict_capture):
     """An ICT subject's capture (a face not made from the template): from the affine start alone the
     contact bands land 1.6 mm from their true places, the template sliding along the skin; the
-    morphable start's run bends less and lies closer to the scan, is kept, and lands them within 0.8 mm."""
+    morphable start's run bends less and lies closer to the scan, is kept whole, and lands them within 0.8 mm."""
     scan, truth = ict_capture
     al = align(scan)
     without = register_template(scan, al, NonrigidParams(morphable=None))
@@ -70,13 +74,13 @@ def test_an_ict_face_registers_from_the_morphable_start(ict_capture):
     assert _error(reg.vertices, truth) < 0.8
     assert reg.start == "morphable" and reg.bending < without.bending
     assert np.nanmean(reg.residual[reg.valid]) < np.nanmean(without.residual[without.valid])
-    assert np.array_equal(reg.other_run, without.vertices) and reg.start_product < 0.9  # the run not kept, as fit.json reports it
+    assert np.array_equal(reg.other_run, without.vertices) and reg.morphable_share == 1.0  # the run not kept, as fit.json reports it
 
 
 @pytest.mark.shared
 def test_a_run_that_bends_a_little_less_and_lies_closer_is_kept(shared_data, tmp_path):
     """ICT subject 9001 (all 100 modes) as a framed capture: the morphable start's run bends 8 % less
-    than the affine start's, under the margin alone, but also lies 7 % closer to the scan: it is kept,
+    than the affine start's, but also lies 7 % closer to the scan (product 0.849): it is kept whole,
     and lands the nasal contact band within 1.0 mm of its true place, where the affine start's run
     slid 2.6 mm along the skin, a design on the wrong place and nothing flagged."""
     ph = make_ict_phantom(9001, pose=FRAMED, model=load_ict(shared_data / "ict_face_model" / "ict_face_model.npz"))
@@ -85,7 +89,7 @@ def test_a_run_that_bends_a_little_less_and_lies_closer_is_kept(shared_data, tmp
     reg = register_template(scan, al)
     affine = register_template(scan, al, NonrigidParams(morphable=None))
     band = TEMPLATE.regions["nasal"].band
-    assert reg.start == "morphable" and reg.bending > 0.9 * affine.bending
+    assert reg.start == "morphable" and reg.morphable_share == 1.0 and reg.bending > 0.9 * affine.bending
     assert np.linalg.norm(reg.vertices[band] - ph.surface[band], axis=1).mean() < 1.0
     assert np.linalg.norm(affine.vertices[band] - ph.surface[band], axis=1).mean() > 2.0
 
@@ -93,16 +97,19 @@ def test_a_run_that_bends_a_little_less_and_lies_closer_is_kept(shared_data, tmp
 def test_a_template_subject_weighs_the_affine_start(tmp_path):
     """A subject made from the template: the model's shape explains it no better than the template's
     own (product 1.0-1.1), so the registration is the affine start's run with at most a fifth of the
-    morphable start's blended in, vertex for vertex, the morphable run within 3 mm of it (mean)."""
+    morphable start's blended in, vertex for vertex, the morphable run within 3 mm of it (mean); its
+    pairs with the scan are measured on the blend (median under 0.15 mm), not the affine run's."""
     scan = _capture(make_phantom(4, pose=FRAMED), tmp_path / "capture")
     al = align(scan)
     reg = register_template(scan, al)
-    affine = register_template(scan, al, replace(NonrigidParams(), morphable=None)).vertices
-    share = morphable_share(reg.start_product, NonrigidParams().morphable.blend)
-    assert reg.start == "affine" and 1.0 <= reg.start_product <= 1.1 and reg.morphable_share == share <= 0.2
+    affine_reg = register_template(scan, al, replace(NonrigidParams(), morphable=None))
+    affine = affine_reg.vertices
+    share = morphable_share(reg.start_product, BLEND)
+    assert reg.start == "affine" and 1.0 <= reg.start_product <= 1.1 and 0.0 < reg.morphable_share == share <= 0.2
     assert np.allclose(reg.vertices, share * reg.other_run + (1.0 - share) * affine, atol=1e-9)
     assert 0.0 < np.linalg.norm(reg.other_run - affine, axis=1).mean() < 3.0
-    assert np.isfinite(reg.residual[reg.valid]).all() and reg.valid.mean() > 0.5  # the blend matched to the scan again
+    assert not np.array_equal(reg.valid, affine_reg.valid) or not np.allclose(reg.residual, affine_reg.residual, equal_nan=True)
+    assert np.median(reg.residual[reg.valid]) < 0.15  # the blend matched to the scan again, and on it
 
 
 def test_the_morphable_share_eases_between_the_blend_bounds():
@@ -116,3 +123,23 @@ def test_the_morphable_share_eases_between_the_blend_bounds():
     assert morphable_share(0.975, blend) == pytest.approx(0.5)
     assert np.all(np.diff(share) <= 0.0) and np.abs(np.diff(share)).max() <= 0.0061
     assert morphable_share(np.nan, blend) == 0.0 and morphable_share(np.inf, blend) == 0.0
+
+
+def test_trusted_landmarks_register_both_runs_again_and_blend_them(tmp_path):
+    """A user's landmarks on the template subject's true places: trusted, both runs are registered
+    again at the paper's weight and blended by the share of the product read at the first pass: the
+    registration is that blend of the affine run so registered (one start alone) and of the
+    morphable run beside it, which is not the first pass's morphable run."""
+    ph = make_phantom(4, pose=FRAMED)
+    scan, truth = _capture(ph, tmp_path / "capture"), ph.surface
+    al = align(scan)
+    index = al.landmarks.template_index
+    user = replace(al, landmarks=Landmarks(scan.vertices[cKDTree(scan.vertices).query(truth[index])[1]], index, np.ones(len(index)), "user"))
+    trusted = register_template(scan, user)
+    untrusted = register_template(scan, user, replace(NonrigidParams(), user_trust_mm=0.0))
+    affine = register_template(scan, user, replace(NonrigidParams(), morphable=None))
+    share = trusted.morphable_share
+    assert trusted.landmark_factor == 1.0 and untrusted.landmark_factor == pytest.approx(0.1)
+    assert trusted.start_product == untrusted.start_product and 0.0 < share == morphable_share(trusted.start_product, BLEND) < 0.5
+    assert np.allclose(trusted.vertices, share * trusted.other_run + (1.0 - share) * affine.vertices, atol=1e-9)
+    assert np.linalg.norm(trusted.other_run - untrusted.other_run, axis=1).mean() > 0.01

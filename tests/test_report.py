@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from cpapfit.align.morphable import MorphableParams
+from cpapfit.align.nonrigid import morphable_share
 from cpapfit.outputs import design_files, input_sha256, run_date
 from cpapfit.report.advice import Notice, at_seal_force, fit_notices, gate_notices, landmark_notices, scan_notices
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files
@@ -244,14 +246,16 @@ def test_a_dense_crop_reaches_the_decimator_thinned(monkeypatch):
 
 
 def test_the_other_starts_contact_band_is_recorded_and_told(designed1, report):
-    """Seed 1 (template-made) keeps its affine start's run; fit.json gives the product over the cut and
-    how far the morphable start's run put the nasal contact band (the two runs' bands, measured here),
-    and the contact-curve caption says the same to 0.1 mm."""
+    """Seed 1 (template-made) weighs its affine start's run most; fit.json gives the product, the
+    morphable run's share (`morphable_share` of the product, under a half) and how far the
+    morphable start's run alone put the nasal contact band (measured here), and the contact-curve
+    caption names that start and says the same to 0.1 mm."""
     _, d = designed1
     _, files, fit, _ = report
     reg, band = d.registration, load_template().regions["nasal"].band
     apart = np.linalg.norm(reg.vertices[band] - reg.other_run[band], axis=1).mean()
     record = fit["registration"]
-    assert record["start"] == "affine" and record["start_product"] >= 0.9
+    share = morphable_share(record["start_product"], MorphableParams().blend)
+    assert record["start"] == "affine" and record["morphable_share"] == pytest.approx(share, abs=1e-4) and share < 0.5
     assert 0.05 < apart < 3.0 and record["other_start_band_mm"] == pytest.approx(apart, abs=1e-3)
-    assert f"put the contact band {apart:.1f} mm (mean) from this one" in files["report.html"].decode()
+    assert f"fitted from the morphable start alone put the contact band {apart:.1f} mm (mean) from this one" in files["report.html"].decode()

@@ -121,7 +121,7 @@ class Registration:
     start: the run that weighs most, "affine" or "morphable" (the template's shape fitted within
     real faces'); morphable_share: the morphable run's share of the vertices (0-1; 0 with one
     start); other_run: (n, 3) the vertices of the run that weighs less (None with one start), how
-    far the choice moves the face; start_product: the morphable run's bending times mean pair
+    far the weighing moves the face; start_product: the morphable run's bending times mean pair
     distance over the affine run's (NaN with one start); start_blend: the products (low, high)
     between which the runs are blended (`morphable_share`; empty with one start). A trusted
     landmarks file registers both runs again at its weight and blends them by the same share.
@@ -144,8 +144,8 @@ class Registration:
         freeze_arrays(self)
 
     def other_run_apart_mm(self, vertices: np.ndarray) -> float:
-        """Mean distance (mm) between the kept and the other run at the (K,) template vertex indices
-        `vertices` (a contact band); NaN with one start."""
+        """Mean distance (mm) between the registration and the run that weighs less in it at the (K,)
+        template vertex indices `vertices` (a contact band); NaN with one start."""
         return np.nan if self.other_run is None else float(np.linalg.norm(self.vertices[vertices] - self.other_run[vertices], axis=1).mean())
 
 
@@ -174,12 +174,12 @@ def register(
     lm_index, lm_target = _landmark_targets(landmarks, params)
     factor = params.detected_landmark_factor if len(lm_index) else 0.0  # none to pull: recorded as none
     runs = _runs(aligned, faces, scan, (lm_index, lm_target), factor, params, mirror, basis)  # one target, the same landmarks
-    product = _product(runs[1][1]) / _product(runs[0][1]) if len(runs) > 1 else np.nan
-    first = _kept(runs, product, faces, params)
+    product = _ratio(_product(runs[1][1]), _product(runs[0][1])) if len(runs) > 1 else np.nan
+    first = _weighed(runs, product, faces, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
         again = [(setup, _register(aligned, faces, setup, (lm_index, lm_target), 1.0, params)) for setup, _ in runs]
-        first = _kept(again, product, faces, params)
+        first = _weighed(again, product, faces, params)
     return replace(first, landmark_spread_mm=spread)
 
 
@@ -190,13 +190,22 @@ def morphable_share(product: float, blend: tuple[float, float]) -> float:
     its slope). ICT faces, not made from the template, read 0.12-0.85 and template-made ones
     0.93-1.34 (`bench/RESULTS.md` section 2); real faces' scans read 0.67-1.03, the same face either
     side of any cut from scan to scan."""
+    lo, hi = blend
     if np.isnan(product):
         return 0.0
-    t = float(np.clip((blend[1] - product) / (blend[1] - blend[0]), 0.0, 1.0))
+    if hi <= lo:  # a cut
+        return float(product < lo)
+    t = float(np.clip((hi - product) / (hi - lo), 0.0, 1.0))
     return t * t * (3.0 - 2.0 * t)
 
 
-def _kept(runs: list, product: float, faces: np.ndarray, params: NonrigidParams) -> Registration:
+def _ratio(a: float, b: float) -> float:
+    """a / b, inf (or NaN for 0 / 0) where b is 0."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(np.float64(a) / b)
+
+
+def _weighed(runs: list, product: float, faces: np.ndarray, params: NonrigidParams) -> Registration:
     """The registration from the elastic runs ((set-up, `Registration`) pairs, the affine start's
     first): the one run, or the two blended by the morphable run's share (`morphable_share` of
     `product`), re-matched to the scan where both weigh."""
@@ -204,12 +213,13 @@ def _kept(runs: list, product: float, faces: np.ndarray, params: NonrigidParams)
         return runs[0][1]
     (setup, affine), (_, morph) = runs
     share = morphable_share(product, params.morphable.blend)
-    major, minor = (morph, affine) if share >= 0.5 else (affine, morph)
+    morph_weighs = share >= 0.5
+    major, minor = (morph, affine) if morph_weighs else (affine, morph)
     if 0.0 < share < 1.0:
         vertices = share * morph.vertices + (1.0 - share) * affine.vertices
         major = replace(major, vertices=vertices, bending=share * morph.bending + (1.0 - share) * affine.bending,
                         **_measured(vertices, faces, setup.target, setup.vf, params))
-    return replace(major, start=("affine", "morphable")[share >= 0.5], morphable_share=share, other_run=minor.vertices,
+    return replace(major, start=("affine", "morphable")[morph_weighs], morphable_share=share, other_run=minor.vertices,
                    start_product=product, start_blend=params.morphable.blend)
 
 

@@ -134,12 +134,12 @@ def _other_start(reg: Registration, mask: str) -> str:
     apart = reg.other_run_apart_mm(load_template().regions[mask].band)
     if np.isnan(apart):
         return ""
-    minor = ("morphable", "affine")[reg.start == "affine"]
-    lo, hi = reg.start_blend
+    minor = "morphable" if reg.start == "affine" else "affine"
+    lo, hi = reg.start_blend if reg.start_blend else (np.nan, np.nan)
     weighed = (f" The morphable start's fit is kept when its bending times its distance from the scan is under {lo:g} of the "
                f"affine start's, the affine start's over {hi:g}, and the two are blended between; here {reg.start_product:.3f}, "
                f"{100 * reg.morphable_share:.0f} % morphable. Near those bounds another scan of this face may weigh the fits "
-               "otherwise, and the seal then lies up to that much further along the skin." if np.isfinite(reg.start_product) else "")
+               "otherwise, and the seal then lies up to that much further along the skin." if np.isfinite([reg.start_product, lo]).all() else "")
     return f" The template fitted from the {minor} start alone put the contact band {apart:.1f} mm (mean) from this one." + weighed
 
 
