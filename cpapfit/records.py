@@ -118,7 +118,7 @@ def other_start(reg: Registration, mask: str) -> dict:
     """The registration against the run that weighs less in it: `start_product` (`Registration.start_product`)
     and `other_start_band_mm`, the mean distance (mm) between the `mask` contact bands of the
     registration and of the run that weighs less in it (both null with one start; the product null
-    where a run found no pairs)."""
+    where the morphable run found no pairs)."""
     if reg.other_run is None:
         return {"start_product": None, "other_start_band_mm": None}
     apart = reg.other_run_apart_mm(load_template().regions[mask].band)

@@ -106,7 +106,7 @@ def test_a_template_subject_weighs_the_affine_start(tmp_path):
     affine = affine_reg.vertices
     share = morphable_share(reg.start_product, BLEND)
     assert reg.start == "affine" and 1.0 <= reg.start_product <= 1.1 and 0.0 < reg.morphable_share == share <= 0.2
-    assert np.allclose(reg.vertices, share * reg.other_run + (1.0 - share) * affine, atol=1e-9)
+    assert np.allclose(reg.vertices, share * reg.other_run + (1.0 - share) * affine, rtol=0.0, atol=1e-9)
     assert 0.0 < np.linalg.norm(reg.other_run - affine, axis=1).mean() < 3.0
     assert not np.array_equal(reg.valid, affine_reg.valid) or not np.allclose(reg.residual, affine_reg.residual, equal_nan=True)
     assert np.median(reg.residual[reg.valid]) < 0.15  # the blend matched to the scan again, and on it
@@ -123,6 +123,7 @@ def test_the_morphable_share_eases_between_the_blend_bounds():
     assert morphable_share(0.975, blend) == pytest.approx(0.5)
     assert np.all(np.diff(share) <= 0.0) and np.abs(np.diff(share)).max() <= 0.0061
     assert morphable_share(np.nan, blend) == 0.0 and morphable_share(np.inf, blend) == 0.0
+    assert morphable_share(0.899, (0.9, 0.9)) == 1.0 and morphable_share(0.9, (0.9, 0.9)) == 0.0  # bounds met: a cut
 
 
 def test_trusted_landmarks_register_both_runs_again_and_blend_them(tmp_path):
@@ -139,7 +140,7 @@ def test_trusted_landmarks_register_both_runs_again_and_blend_them(tmp_path):
     untrusted = register_template(scan, user, replace(NonrigidParams(), user_trust_mm=0.0))
     affine = register_template(scan, user, replace(NonrigidParams(), morphable=None))
     share = trusted.morphable_share
-    assert trusted.landmark_factor == 1.0 and untrusted.landmark_factor == pytest.approx(0.1)
+    assert trusted.landmark_factor == affine.landmark_factor == 1.0 and untrusted.landmark_factor == pytest.approx(0.1)
     assert trusted.start_product == untrusted.start_product and 0.0 < share == morphable_share(trusted.start_product, BLEND) < 0.5
-    assert np.allclose(trusted.vertices, share * trusted.other_run + (1.0 - share) * affine.vertices, atol=1e-9)
+    assert np.allclose(trusted.vertices, share * trusted.other_run + (1.0 - share) * affine.vertices, rtol=0.0, atol=1e-9)
     assert np.linalg.norm(trusted.other_run - untrusted.other_run, axis=1).mean() > 0.01

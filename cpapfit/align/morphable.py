@@ -49,6 +49,10 @@ class MorphableParams:
     converged: float = 1e-3
     blend: tuple[float, float] = (0.85, 1.1)
 
+    def __post_init__(self):
+        if self.blend[1] < self.blend[0]:
+            raise ValueError(f"blend bounds {self.blend} run backwards: (low, high), equal for a cut")
+
 
 @dataclass(frozen=True)
 class ShapeBasis:

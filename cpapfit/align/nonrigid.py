@@ -18,9 +18,9 @@ shape of the side seen, while the skin is free to be asymmetric once the membran
 morphable start (align/morphable.py: the template's shape fitted within real faces' identity modes,
 begun at the similarity): the elastic ICP runs from it too, and the two runs' bending from their
 starts and mean distances from the scan, each the morphable run's as a share of the affine run's,
-multiply to a product that weighs them (`morphable_share`): well under 1 the face is more like the
-model's faces than the template's and the morphable run is kept, near 1 or over it the affine
-run, and between `MorphableParams.blend`'s bounds the two runs are blended, so that two scans of
+multiply to a product that weighs them (`morphable_share`): under `MorphableParams.blend`'s low
+bound (0.85) the face is more like the model's faces than the template's and the morphable run is
+kept, over its high bound (1.1) the affine run, and between them the two runs are blended, so that two scans of
 one face reading products either side of a cut do not put its seal two runs apart. With all six off
 (`affine=None`, `detected_landmark_factor=1`, `user_trust_mm=inf`, `coarse_gates=None`,
 `symmetry=0`, `morphable=None`) this is the paper's method.

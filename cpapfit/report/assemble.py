@@ -136,8 +136,9 @@ def _other_start(reg: Registration, mask: str) -> str:
         return ""
     minor = "morphable" if reg.start == "affine" else "affine"
     lo, hi = reg.start_blend if reg.start_blend else (np.nan, np.nan)
+    between = f"the affine start's over {hi:g}, and the two are blended between" if hi > lo else "the affine start's otherwise"
     weighed = (f" The morphable start's fit is kept when its bending times its distance from the scan is under {lo:g} of the "
-               f"affine start's, the affine start's over {hi:g}, and the two are blended between; here {reg.start_product:.3f}, "
+               f"affine start's, {between}; here {reg.start_product:.3f}, "
                f"{100 * reg.morphable_share:.0f} % morphable. Near those bounds another scan of this face may weigh the fits "
                "otherwise, and the seal then lies up to that much further along the skin." if np.isfinite([reg.start_product, lo]).all() else "")
     return f" The template fitted from the {minor} start alone put the contact band {apart:.1f} mm (mean) from this one." + weighed
