@@ -20,8 +20,9 @@ begun at the similarity): the elastic ICP runs from it too, and the two runs' be
 starts and mean distances from the scan, each the morphable run's as a share of the affine run's,
 multiply to a product that weighs them (`morphable_share`): under `MorphableParams.blend`'s low
 bound (0.85) the face is more like the model's faces than the template's and the morphable run is
-kept, over its high bound (1.1) the affine run, and between them the two runs are blended, so that two scans of
-one face reading products either side of a cut do not put its seal two runs apart. With all six off
+kept, over its high bound (1.1) the affine run, and between them the two runs are blended, so
+that two scans of one face reading products either side of a cut do not put its seal two runs
+apart. With all six off
 (`affine=None`, `detected_landmark_factor=1`, `user_trust_mm=inf`, `coarse_gates=None`,
 `symmetry=0`, `morphable=None`) this is the paper's method.
 
@@ -118,9 +119,9 @@ class Registration:
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
     landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
     start, how far the face had to bend away from the start's shape (of a blend, the runs' blended);
-    start: the run that weighs most, "affine" or "morphable" (the template's shape fitted within
-    real faces'); morphable_share: the morphable run's share of the vertices (0-1; 0 with one
-    start); other_run: (n, 3) the vertices of the run that weighs less (None with one start), how
+    morphable_share: the morphable run's share of the vertices (0-1; 0 with one start; `start`
+    names the run that weighs most, "affine" or "morphable": the template's shape fitted within
+    real faces'); other_run: (n, 3) the vertices of the run that weighs less (None with one start), how
     far the weighing moves the face; start_product: the morphable run's bending times mean pair
     distance over the affine run's (NaN with one start); start_blend: the products (low, high)
     between which the runs are blended (`morphable_share`; empty with one start). A trusted
@@ -134,7 +135,6 @@ class Registration:
     landmark_factor: float = 1.0
     landmark_spread_mm: float = np.nan
     bending: float = np.nan
-    start: str = "affine"
     morphable_share: float = 0.0
     other_run: np.ndarray | None = None
     start_product: float = np.nan
@@ -142,6 +142,11 @@ class Registration:
 
     def __post_init__(self):
         freeze_arrays(self)
+
+    @property
+    def start(self) -> str:
+        """The start whose run weighs most: "morphable" from a share of a half, else "affine"."""
+        return "morphable" if self.morphable_share >= 0.5 else "affine"
 
     def other_run_apart_mm(self, vertices: np.ndarray) -> float:
         """Mean distance (mm) between the registration and the run that weighs less in it at the (K,)
@@ -213,13 +218,12 @@ def _weighed(runs: list, product: float, faces: np.ndarray, params: NonrigidPara
         return runs[0][1]
     (setup, affine), (_, morph) = runs
     share = morphable_share(product, params.morphable.blend)
-    morph_weighs = share >= 0.5
-    major, minor = (morph, affine) if morph_weighs else (affine, morph)
+    major, minor = (morph, affine) if share >= 0.5 else (affine, morph)
     if 0.0 < share < 1.0:
         vertices = share * morph.vertices + (1.0 - share) * affine.vertices
         major = replace(major, vertices=vertices, bending=share * morph.bending + (1.0 - share) * affine.bending,
                         **_measured(vertices, faces, setup.target, setup.vf, params))
-    return replace(major, start=("affine", "morphable")[morph_weighs], morphable_share=share, other_run=minor.vertices,
+    return replace(major, morphable_share=share, other_run=minor.vertices,
                    start_product=product, start_blend=params.morphable.blend)
 
 
