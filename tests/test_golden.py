@@ -11,11 +11,19 @@ from cpapfit.records import design_record
 
 GOLDEN = json.loads((Path(__file__).resolve().parent / "golden_fit.json").read_text())
 TOLERANCE = {  # how far a figure may move (its unit) before the change is a change of figures
-    "residual_median_mm": 0.002, "rim_gap_median_mm": 0.002, "headgear_force_n": 0.01, "pressure_max_kpa": 0.01,
-    "window_fraction": 0.005, "leak_l_min": 0.01, "stock_pressure_max_kpa": 0.01,
+    "residual_median_mm": 0.002, "rim_gap_median_mm": 0.002, "headgear_force_n": 0.01, "pressure_mean_kpa": 0.005,
+    # the peak of 256 rim points, which the capture's depth noise makes jagged (seed 2's oronasal: 2.5-2.85 kPa
+    # 1 mm apart): a 1e-4 mm change of the registration moved it from 2.85 to 2.99 kPa in one of 18 trials
+    "pressure_max_kpa": 0.2,
+    "window_fraction": 0.005, "leak_l_min": 0.01,
+    # the stock size's peak at 1.1 times its seal force (a 0.01 N bisection), on a registration that moves by
+    # up to 0.03 mm with the last bits of OpenBLAS's arithmetic (another CPU, another thread count): 0.017 and
+    # 0.028 kPa seen
+    "stock_pressure_max_kpa": 0.05,
 }
 WHERE = {"residual_median_mm": ("registration", "residual_median_mm"), "rim_gap_median_mm": ("fit_before_compression", "rim_gap_median_mm"),
          "headgear_force_n": ("custom", "headgear_force_n"), "pressure_max_kpa": ("custom", "pressure_max_kpa"),
+         "pressure_mean_kpa": ("custom", "pressure_mean_kpa"),
          "window_fraction": ("custom", "window_fraction"), "leak_l_min": ("custom", "leak_l_min"),
          "stock_size": ("stock_fitting", "size"), "stock_pressure_max_kpa": ("stock", "pressure_max_kpa")}
 

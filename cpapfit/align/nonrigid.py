@@ -68,6 +68,11 @@ from .laplacian import laplacian
 from .morphable import MorphableParams, ShapeBasis, fit_shape
 from .symmetry import MirrorTerm, mirror_term, plane_of_pairs, symmetry_plane
 
+# A registration's vertices are kept to 10^-GRID_DECIMALS mm (a micrometre; its residuals measured
+# before): the last bits of its solves vary with the memory alignment of the arrays OpenBLAS reads
+# (~5e-12 mm), and the design downstream would carry them into its figures and bytes.
+GRID_DECIMALS = 3
+
 
 @dataclass(frozen=True)
 class NonrigidParams:
@@ -217,11 +222,11 @@ def _weighed(runs: list, product: float, faces: np.ndarray, params: NonrigidPara
     if len(runs) == 1:
         return runs[0][1]
     (setup, affine), (_, morph) = runs
-    share = morphable_share(product, params.morphable.blend)
+    share = round(morphable_share(product, params.morphable.blend), 6)  # its last bits vary as the runs' (GRID_DECIMALS)
     major, minor = (morph, affine) if share >= 0.5 else (affine, morph)
     if 0.0 < share < 1.0:
         vertices = share * morph.vertices + (1.0 - share) * affine.vertices
-        major = replace(major, vertices=vertices, bending=share * morph.bending + (1.0 - share) * affine.bending,
+        major = replace(major, vertices=np.round(vertices, GRID_DECIMALS), bending=share * morph.bending + (1.0 - share) * affine.bending,
                         **_measured(vertices, faces, setup.target, setup.vf, params))
     return replace(major, morphable_share=share, other_run=minor.vertices,
                    start_product=product, start_blend=params.morphable.blend)
@@ -318,7 +323,7 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
             mu, lam = mu * params.relax_factor, lam * params.relax_factor
             system.refactor(mu, lam)
     final = start + disp
-    return Registration(final, log=tuple(log), landmark_factor=factor, bending=float(np.sum((lap @ disp) ** 2)),
+    return Registration(np.round(final, GRID_DECIMALS), log=tuple(log), landmark_factor=factor, bending=float(np.sum((lap @ disp) ** 2)),
                         **_measured(final, faces, target, vf, params))
 
 

@@ -31,9 +31,26 @@ def write_files(folder: Path, files: dict[str, bytes]) -> list[Path]:
     return written
 
 
-def json_bytes(obj) -> bytes:
-    """Deterministic, readable JSON."""
-    return (json.dumps(obj, indent=1, sort_keys=False) + "\n").encode()
+RECORD_DIGITS = 10  # significant digits of a float in a design's records (fit.json and the like)
+
+
+def json_bytes(obj, digits: int | None = None) -> bytes:
+    """Deterministic, readable JSON; with `digits`, every float to that many significant digits
+    (`RECORD_DIGITS` for what a design computed: BLAS's dot products (OpenBLAS's AVX-512 kernels)
+    differ in their last bits with the arrays' memory alignment, so the same design made in another
+    process could otherwise differ in its bytes)."""
+    return (json.dumps(obj if digits is None else _rounded(obj, digits), indent=1, sort_keys=False) + "\n").encode()
+
+
+def _rounded(obj, digits: int):
+    """`obj` with every float (in dicts, lists and tuples) to `digits` significant digits."""
+    if isinstance(obj, float):
+        return float(f"{obj:.{digits}g}")
+    if isinstance(obj, dict):
+        return {k: _rounded(v, digits) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_rounded(v, digits) for v in obj]
+    return obj
 
 
 def png_bytes(image: np.ndarray) -> bytes:
