@@ -18,7 +18,7 @@ from .outputs import registration_ply
 from .io.landmarks import user_landmarks
 from .io.phantom import write_head_mesh, write_phantom, write_sweep
 from .io.summary import counts, summary_csv, summary_html
-from .io.write import RECORD_DIGITS, json_bytes, png_bytes, write_bytes, write_files
+from .io.write import json_bytes, png_bytes, record_bytes, write_bytes, write_files
 from .jobs import ScanTask, design_folder
 from .landmarks.types import Landmarks
 from .synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
@@ -203,7 +203,7 @@ def cmd_evaluate(args) -> int:
     cushion = load_cushion(Path(args.cushion))
     params = api.Params(fit=api.FitParams(cpap_cmh2o=args.cpap))
     record = api.evaluate(scan, cushion, args.mask, args.generic, stock, args.states, args.force, args.landmarks, params, str(args.cushion))
-    write_bytes(Path(args.out), json_bytes(record, RECORD_DIGITS))
+    write_bytes(Path(args.out), record_bytes(record))
     info(f"{scan.units_note}; {fit_summary(record)} -> {args.out}")
     for row in record.get("states", [])[1:]:
         info(f"  {state_summary(row)}")

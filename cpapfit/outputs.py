@@ -12,7 +12,7 @@ import numpy as np
 
 from .align.nonrigid import Registration
 from .fabrication.files import checked_assembly, checked_files
-from .io.write import RECORD_DIGITS, json_bytes, ply_bytes
+from .io.write import ply_bytes, record_bytes
 from .pipeline import Design
 from .records import contact_curve_record, design_record, mask_record
 from .report.assemble import Provenance, report_files as assemble_report
@@ -39,10 +39,10 @@ def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
     meshes |= checked_assembly({"cushion": d.solid, "frame": d.frame.mesh}, "assembly", passed)
     return {
         "registered_template.ply": registration_ply(d.registration),
-        "contact_curve.json": json_bytes(contact_curve_record(d), RECORD_DIGITS),
+        "contact_curve.json": record_bytes(contact_curve_record(d)),
         **meshes,
-        "mask.json": json_bytes(mask_record(d), RECORD_DIGITS),
-        "fit.json": json_bytes(design_record(d, scan), RECORD_DIGITS),
+        "mask.json": record_bytes(mask_record(d)),
+        "fit.json": record_bytes(design_record(d, scan)),
     }
 
 

@@ -117,8 +117,10 @@ def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
     again = written(evaluated, "fit")  # the written STL, evaluated alone, gives design's numbers
     assert set(again) >= {"cpap_cmh2o", "headgear_force_n", "custom", "tissue_model", "states"} and "generic" not in again
     assert again["headgear_force_n"] == pytest.approx(fit["headgear_force_n"], abs=0.01)
-    for key in ("pressure_mean_kpa", "pressure_max_kpa", "leak_l_min"):
+    for key in ("pressure_mean_kpa", "leak_l_min"):
         assert again["custom"][key] == pytest.approx(fit["custom"][key], abs=0.01), key
+    # the peak, read off the float32 STL (its vertices ~1e-5 mm off): it jumps ~0.14 kPa under 1e-4 mm (RESULTS 8)
+    assert again["custom"]["pressure_max_kpa"] == pytest.approx(fit["custom"]["pressure_max_kpa"], abs=0.2)
     assert [s["name"] for s in again["states"]] == [s["name"] for s in fit["states"]] and len(fit["states"]) == 8
     for state, designed_state in zip(again["states"], fit["states"]):  # each state of the sleeping face, alike
         for key in ("leak_l_min", "pressure_max_kpa"):

@@ -68,10 +68,12 @@ from .laplacian import laplacian
 from .morphable import MorphableParams, ShapeBasis, fit_shape
 from .symmetry import MirrorTerm, mirror_term, plane_of_pairs, symmetry_plane
 
-# A registration's vertices are kept to 10^-GRID_DECIMALS mm (a micrometre; its residuals measured
-# before): the last bits of its solves vary with the memory alignment of the arrays OpenBLAS reads
-# (~5e-12 mm), and the design downstream would carry them into its figures and bytes.
+# A registration's vertices are kept to 10^-GRID_DECIMALS mm (a micrometre; its residuals measured on
+# the unrounded ones) and its morphable share to SHARE_DECIMALS decimals: the last bits of its solves
+# vary with the memory alignment of the arrays OpenBLAS reads (~5e-12 mm), and the design downstream
+# would carry them into its figures and bytes.
 GRID_DECIMALS = 3
+SHARE_DECIMALS = 6
 
 
 @dataclass(frozen=True)
@@ -118,13 +120,13 @@ class IterationLog:
 class Registration:
     """The warped template (template vertex order, mm, scan frame).
 
-    vertices: (n, 3); residual: (n,) distance (mm) to the matched scan point in the last
+    vertices: (n, 3), to the micrometre (GRID_DECIMALS); residual: (n,) distance (mm) to the matched scan point in the last
     iteration, point-to-plane (NaN where unmatched); valid: (n,) matched in the last iteration; log: per iteration;
     landmark_factor: the share of the paper's landmark weight used; landmark_spread_mm: median distance
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
     landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
     start, how far the face had to bend away from the start's shape (of a blend, the runs' blended);
-    morphable_share: the morphable run's share of the vertices (0-1; 0 with one start; `start`
+    morphable_share: the morphable run's share of the vertices (0-1, to SHARE_DECIMALS; 0 with one start; `start`
     names the run that weighs most, "affine" or "morphable": the template's shape fitted within
     real faces'); other_run: (n, 3) the vertices of the run that weighs less (None with one start), how
     far the weighing moves the face; start_product: the morphable run's bending times mean pair
@@ -222,7 +224,7 @@ def _weighed(runs: list, product: float, faces: np.ndarray, params: NonrigidPara
     if len(runs) == 1:
         return runs[0][1]
     (setup, affine), (_, morph) = runs
-    share = round(morphable_share(product, params.morphable.blend), 6)  # its last bits vary as the runs' (GRID_DECIMALS)
+    share = round(morphable_share(product, params.morphable.blend), SHARE_DECIMALS)
     major, minor = (morph, affine) if share >= 0.5 else (affine, morph)
     if 0.0 < share < 1.0:
         vertices = share * morph.vertices + (1.0 - share) * affine.vertices

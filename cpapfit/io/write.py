@@ -34,22 +34,28 @@ def write_files(folder: Path, files: dict[str, bytes]) -> list[Path]:
 RECORD_DIGITS = 10  # significant digits of a float in a design's records (fit.json and the like)
 
 
-def json_bytes(obj, digits: int | None = None) -> bytes:
-    """Deterministic, readable JSON; with `digits`, every float to that many significant digits
-    (`RECORD_DIGITS` for what a design computed: BLAS's dot products (OpenBLAS's AVX-512 kernels)
-    differ in their last bits with the arrays' memory alignment, so the same design made in another
-    process could otherwise differ in its bytes)."""
-    return (json.dumps(obj if digits is None else _rounded(obj, digits), indent=1, sort_keys=False) + "\n").encode()
+def json_bytes(obj) -> bytes:
+    """Deterministic, readable JSON, every float as it is (files read back as input: a capture's
+    intrinsics, a phantom's truth, landmarks)."""
+    return (json.dumps(obj, indent=1, sort_keys=False) + "\n").encode()
 
 
-def _rounded(obj, digits: int):
-    """`obj` with every float (in dicts, lists and tuples) to `digits` significant digits."""
+def record_bytes(obj) -> bytes:
+    """`json_bytes` of a computed record, every float to RECORD_DIGITS significant digits: the last
+    bits of OpenBLAS's arithmetic (its AVX-512 kernels) vary with the arrays' memory alignment, so
+    the same design made in another process could otherwise differ in its bytes."""
+    return json_bytes(_rounded(obj))
+
+
+def _rounded(obj):
+    """`obj` with every float (in dicts, lists and tuples; numpy's float64 is one) to RECORD_DIGITS
+    significant digits; NaN and infinities as they are."""
     if isinstance(obj, float):
-        return float(f"{obj:.{digits}g}")
+        return float(f"{obj:.{RECORD_DIGITS}g}")
     if isinstance(obj, dict):
-        return {k: _rounded(v, digits) for k, v in obj.items()}
+        return {k: _rounded(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_rounded(v, digits) for v in obj]
+        return [_rounded(v) for v in obj]
     return obj
 
 
