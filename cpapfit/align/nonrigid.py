@@ -120,14 +120,15 @@ class IterationLog:
 class Registration:
     """The warped template (template vertex order, mm, scan frame).
 
-    vertices: (n, 3), to the micrometre (GRID_DECIMALS); residual: (n,) distance (mm) to the matched scan point in the last
-    iteration, point-to-plane (NaN where unmatched); valid: (n,) matched in the last iteration; log: per iteration;
+    vertices: (n, 3), to the micrometre (GRID_DECIMALS); residual: (n,) distance (mm) to the matched
+    scan point in the last iteration, point-to-plane (NaN where unmatched; measured on the unrounded
+    vertices); valid: (n,) matched in the last iteration; log: per iteration;
     landmark_factor: the share of the paper's landmark weight used; landmark_spread_mm: median distance
     (mm) of the trusted landmarks to their template vertices on the face registered at the detected
     landmarks' weight (NaN without landmarks); bending: |L D|^2 (mm^2) of the displacement from its
     start, how far the face had to bend away from the start's shape (of a blend, the runs' blended);
-    morphable_share: the morphable run's share of the vertices (0-1, to SHARE_DECIMALS; 0 with one start; `start`
-    names the run that weighs most, "affine" or "morphable": the template's shape fitted within
+    morphable_share: the morphable run's share of the vertices (0-1, to SHARE_DECIMALS; 0 with one
+    start; `start` names the run that weighs most, "affine" or "morphable": the template's shape fitted within
     real faces'); other_run: (n, 3) the vertices of the run that weighs less (None with one start), how
     far the weighing moves the face; start_product: the morphable run's bending times mean pair
     distance over the affine run's (NaN with one start); start_blend: the products (low, high)
