@@ -35,6 +35,22 @@ class Intrinsics:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
 
+def _require_capture_parts(scan: "Scan") -> None:
+    """ValueError unless a scan with a depth image (a capture) carries what its stages read with it:
+    `valid` and `pixel_vertex` of the depth image's (H, W), `pixel_vertex` naming each vertex once at
+    exactly the valid pixels, and `intrinsics` of that size."""
+    if scan.depth is None:
+        return
+    shape = np.shape(scan.depth)
+    if scan.valid is None or scan.pixel_vertex is None or scan.intrinsics is None:
+        raise ValueError("a capture Scan (with depth) needs valid, pixel_vertex and intrinsics")
+    if np.shape(scan.valid) != shape or np.shape(scan.pixel_vertex) != shape or (scan.intrinsics.height, scan.intrinsics.width) != shape:
+        raise ValueError(f"a capture Scan's valid, pixel_vertex and intrinsics must be of its depth image's size {shape[1]}x{shape[0]}")
+    named = np.asarray(scan.pixel_vertex)[np.asarray(scan.valid)]
+    if (np.asarray(scan.pixel_vertex)[~np.asarray(scan.valid)] != -1).any() or not np.array_equal(np.sort(named), np.arange(len(scan.vertices))):
+        raise ValueError("a capture Scan's pixel_vertex must name each vertex once, at its valid pixels (-1 elsewhere)")
+
+
 @dataclass(frozen=True)
 class Scan:
     """A facial scan in millimetres.
@@ -53,6 +69,8 @@ class Scan:
     source: the path the scan was read from.
     units: the unit the input was in (a key of `io.units.MM_PER_UNIT`: "mm", "cm", "m", "um" or "in").
     units_note: how that unit was decided, in words.
+    A capture (depth given) carries valid, pixel_vertex and intrinsics of its depth image's size,
+    pixel_vertex naming each vertex once (ValueError otherwise).
     """
 
     vertices: np.ndarray
@@ -71,6 +89,7 @@ class Scan:
     intrinsics: Intrinsics | None = None
 
     def __post_init__(self):
+        _require_capture_parts(self)
         freeze_arrays(self)
 
     @property

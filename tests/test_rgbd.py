@@ -63,6 +63,28 @@ def test_grid_boundary_equals_the_edge_definition():
     assert scan.rims[~used].all()  # a pixel with no triangle is no place to match
 
 
+def test_a_capture_scan_carries_its_pixels_and_camera():
+    """A Scan with a depth image and without its valid mask, its pixels' vertices or its camera, or
+    with them of another size or naming vertices it does not have, is no capture: ValueError."""
+    from dataclasses import replace
+
+    import pytest
+
+    from cpapfit.scan import Scan
+
+    depth = np.full((48, 64), 500.0)
+    valid = np.ones(depth.shape, dtype=bool)
+    pixel_vertex, faces = grid_triangles(depth, valid, K)
+    pts = backproject(depth, K)[valid]
+    scan = Scan(vertices=pts, faces=faces, normals=np.zeros_like(pts), depth=depth, valid=valid, pixel_vertex=pixel_vertex, intrinsics=K)
+    assert scan.is_capture
+    other = Intrinsics(32, 24, K.fx, K.fy, K.cx, K.cy)
+    for broken in ({"intrinsics": None}, {"valid": None}, {"intrinsics": other}, {"pixel_vertex": np.zeros_like(pixel_vertex)},
+                   {"valid": valid[:, :32]}):
+        with pytest.raises(ValueError, match="capture Scan"):
+            replace(scan, **broken)
+
+
 def test_colour_is_registered_to_depth_through_the_extrinsics():
     """A wall 500 mm away seen by a depth camera and a colour camera 25 mm to its right (half the
     depth camera's resolution), whose image codes each pixel's column and row: every depth pixel
