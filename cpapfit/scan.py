@@ -44,6 +44,8 @@ def _require_capture_parts(scan: "Scan") -> None:
     shape = np.shape(scan.depth)
     if scan.valid is None or scan.pixel_vertex is None or scan.intrinsics is None:
         raise ValueError("a capture Scan (with depth) needs valid, pixel_vertex and intrinsics")
+    if len(shape) != 2 or np.asarray(scan.valid).dtype != bool or not np.issubdtype(np.asarray(scan.pixel_vertex).dtype, np.integer):
+        raise ValueError("a capture Scan's depth is an (H, W) image, its valid mask bool and its pixel_vertex integers")
     if np.shape(scan.valid) != shape or np.shape(scan.pixel_vertex) != shape or (scan.intrinsics.height, scan.intrinsics.width) != shape:
         raise ValueError(f"a capture Scan's valid, pixel_vertex and intrinsics must be of its depth image's size {shape[1]}x{shape[0]}")
     named = np.asarray(scan.pixel_vertex)[np.asarray(scan.valid)]
@@ -70,7 +72,7 @@ class Scan:
     units: the unit the input was in (a key of `io.units.MM_PER_UNIT`: "mm", "cm", "m", "um" or "in").
     units_note: how that unit was decided, in words.
     A capture (depth given) carries valid, pixel_vertex and intrinsics of its depth image's size,
-    pixel_vertex naming each vertex once (ValueError otherwise).
+    pixel_vertex naming each vertex once at exactly the valid pixels, -1 elsewhere (ValueError otherwise).
     """
 
     vertices: np.ndarray

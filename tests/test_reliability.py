@@ -369,7 +369,8 @@ def test_a_depth_image_riddled_with_small_holes_has_data_only_near_its_pixels():
     vertices = np.column_stack([grid, np.zeros(len(grid))])
     pixel_vertex = np.full(len(valid), -1)
     pixel_vertex[valid] = np.arange(len(grid))
-    capture = Scan(vertices, np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1)), depth=np.zeros((81, 121)),
-                   valid=valid.reshape(81, 121), pixel_vertex=pixel_vertex.reshape(81, 121), intrinsics=Intrinsics(121, 81, 1.0, 1.0, 60.0, 40.0))
+    valid = valid.reshape(81, 121)
+    capture = Scan(vertices, np.zeros((0, 3), dtype=np.int64), np.tile([0.0, 0.0, 1.0], (len(grid), 1)), depth=np.where(valid, 0.0, np.nan),
+                   valid=valid, pixel_vertex=pixel_vertex.reshape(81, 121), intrinsics=Intrinsics(121, 81, 1.0, 1.0, 60.0, 40.0))
     middles = np.array([[3.5 + 6 * i, 3.5 + 6 * j, 0.0] for i in range(-5, 5) for j in range(-5, 5)])
     assert not _has_data(capture, cKDTree(vertices), middles, QualityParams().near_mm).any()

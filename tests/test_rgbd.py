@@ -74,13 +74,19 @@ def test_a_capture_scan_carries_its_pixels_and_camera():
 
     depth = np.full((48, 64), 500.0)
     valid = np.ones(depth.shape, dtype=bool)
+    valid[10:20, 10:20] = False
+    depth[~valid] = np.nan
     pixel_vertex, faces = grid_triangles(depth, valid, K)
     pts = backproject(depth, K)[valid]
     scan = Scan(vertices=pts, faces=faces, normals=np.zeros_like(pts), depth=depth, valid=valid, pixel_vertex=pixel_vertex, intrinsics=K)
     assert scan.is_capture
     other = Intrinsics(32, 24, K.fx, K.fy, K.cx, K.cy)
-    for broken in ({"intrinsics": None}, {"valid": None}, {"intrinsics": other}, {"pixel_vertex": np.zeros_like(pixel_vertex)},
-                   {"valid": valid[:, :32]}):
+    named_twice, at_a_hole = pixel_vertex.copy(), pixel_vertex.copy()
+    named_twice[0, 0] = named_twice[0, 1]
+    at_a_hole[15, 15] = 0
+    for broken in ({"intrinsics": None}, {"valid": None}, {"pixel_vertex": None}, {"intrinsics": other}, {"valid": valid[:, :32]},
+                   {"pixel_vertex": named_twice}, {"pixel_vertex": at_a_hole}, {"pixel_vertex": pixel_vertex.astype(float)},
+                   {"valid": valid.astype(float)}, {"depth": depth.ravel()}):
         with pytest.raises(ValueError, match="capture Scan"):
             replace(scan, **broken)
 
