@@ -44,12 +44,12 @@ def _require_capture_parts(scan: "Scan") -> None:
     shape = np.shape(scan.depth)
     if scan.valid is None or scan.pixel_vertex is None or scan.intrinsics is None:
         raise ValueError("a capture Scan (with depth) needs valid, pixel_vertex and intrinsics")
-    if len(shape) != 2 or np.asarray(scan.valid).dtype != bool or not np.issubdtype(np.asarray(scan.pixel_vertex).dtype, np.integer):
+    valid, pixel_vertex = np.asarray(scan.valid), np.asarray(scan.pixel_vertex)
+    if len(shape) != 2 or valid.dtype != bool or not np.issubdtype(pixel_vertex.dtype, np.integer):
         raise ValueError("a capture Scan's depth is an (H, W) image, its valid mask bool and its pixel_vertex integers")
-    if np.shape(scan.valid) != shape or np.shape(scan.pixel_vertex) != shape or (scan.intrinsics.height, scan.intrinsics.width) != shape:
+    if valid.shape != shape or pixel_vertex.shape != shape or (scan.intrinsics.height, scan.intrinsics.width) != shape:
         raise ValueError(f"a capture Scan's valid, pixel_vertex and intrinsics must be of its depth image's size {shape[1]}x{shape[0]}")
-    named = np.asarray(scan.pixel_vertex)[np.asarray(scan.valid)]
-    if (np.asarray(scan.pixel_vertex)[~np.asarray(scan.valid)] != -1).any() or not np.array_equal(np.sort(named), np.arange(len(scan.vertices))):
+    if (pixel_vertex[~valid] != -1).any() or not np.array_equal(np.sort(pixel_vertex[valid]), np.arange(len(scan.vertices))):
         raise ValueError("a capture Scan's pixel_vertex must name each vertex once, at its valid pixels (-1 elsewhere)")
 
 

@@ -118,4 +118,3 @@ def test_a_sliver_a_few_float32_steps_across_is_welded_wider_until_its_file_is_c
     cleaned = clean_as_written(solid)
     assert check_file(read_stl(checked_files(cleaned, "part")["part.stl"]), "part.stl")["zero_area_triangles"] == 0
     assert cleaned.volume == pytest.approx(part.volume, abs=0.01)
-
