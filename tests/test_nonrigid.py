@@ -16,7 +16,7 @@ from cpapfit.landmarks.types import Landmarks
 from cpapfit.synthetic.accuracy import flipped_triangles, scan_to_template
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.synthetic.camera import FRAMED
-from cpapfit.pipeline import align
+from cpapfit.pipeline import align, register_template
 from cpapfit.rgbd import project
 from cpapfit.scan import Scan
 from cpapfit.template import load_template, mask_region
@@ -193,15 +193,17 @@ def test_shared_real_scans_register(shared_data, name, cli, tmp_path):
 
 @pytest.mark.shared
 def test_fran_registers_alike_under_a_ten_thousandth_of_a_millimetre(shared_data):
-    """fran's vertices moved by 1e-4 mm noise (as another exporter's rounding would) register
-    within 0.3 mm on average, 1 mm at most, of fran's own over the mask region. With the affine
-    start begun at the similarity only, these two seeds put the template 2.5 mm away (7 mm at most)."""
+    """fran's vertices moved by 1e-4 mm noise (as another exporter's rounding would) register within
+    0.1 mm on average, 0.5 mm at most, of fran's own over the mask region (0.02-0.04 / 0.13-0.21 mm
+    over noise seeds 1-6). The noise moves the detected landmarks (renders shade a little
+    differently), and the affine start's run alone, whose ICP has not settled, follows them by up to
+    1.2 mm; the registration is the morphable start's run (its share 1), which does not."""
     scan = load_scan(shared_data / "fran_cyberware" / "fran.obj")
-    reference = registered(scan).vertices[REGION]
-    for seed in (1, 2):
+    reference = register_template(scan, align(scan)).vertices[REGION]
+    for seed in (1, 4):
         noisy = replace(scan, vertices=scan.vertices + np.random.default_rng(seed).normal(0.0, 1e-4, scan.vertices.shape))
-        gap = np.linalg.norm(registered(noisy).vertices[REGION] - reference, axis=1)
-        assert gap.mean() <= 0.3 and gap.max() <= 1.0
+        gap = np.linalg.norm(register_template(noisy, align(noisy)).vertices[REGION] - reference, axis=1)
+        assert gap.mean() <= 0.1 and gap.max() <= 0.5
 
 
 def test_a_chin_far_from_the_template_is_pulled_in():
