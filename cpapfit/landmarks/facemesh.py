@@ -3,9 +3,9 @@
 Landmark i < 468 is canonical-face vertex i; 468-477 are the irises. Each face is read twice, on
 the image and on its mirror image (landmark i there read at its mirror partner's place), and the
 two readings of landmarks 0-467 averaged: the detector's errors that do not follow the face into
-the mirror cancel in part (a lifted landmark's error against the truth, median 2.87 -> 2.59 mm over
-36 synthetic captures and head meshes, `bench/RESULTS.md` section 1). MediaPipe's C++ logging is
-kept off the terminal (it writes to file descriptor 2 directly).
+the mirror cancel in part (lifted landmarks nearer their true places on 37 of 50 synthetic faces,
+`bench/RESULTS.md` section 1). MediaPipe's C++ logging is kept off the terminal (it writes to file
+descriptor 2 directly).
 """
 
 import contextlib
