@@ -19,7 +19,7 @@ from ..template import N_LANDMARKS, load_template
 from ..thresholds import MIN_DETECTION_CONFIDENCE
 
 MAX_FACES = 2  # to notice a second face, not to use it
-SAME_FACE_PX = 20.0  # a face in the mirror image is the image's face when their landmarks lie a median this close
+SAME_FACE = 0.1  # a face in the mirror image is the image's face when their landmarks lie a median this share of its size apart
 
 
 @contextlib.contextmanager
@@ -65,7 +65,7 @@ def _forget_import_errors(package: str) -> None:
 def detect(image: np.ndarray) -> list[np.ndarray]:
     """Faces in an (H, W, 3) uint8 RGB image: a list of (478, 2) pixel coordinates (u, v), centre-based;
     landmarks 0-467 averaged with the mirror image's reading of the same face where it finds one
-    within SAME_FACE_PX (the irises as read on the image)."""
+    (`_averaged`; the irises as read on the image)."""
     mirrored = [_unmirrored(face, image.shape[1]) for face in _detect(np.ascontiguousarray(image[:, ::-1]))]
     return [_averaged(face, mirrored) for face in _detect(image)]
 
@@ -80,9 +80,10 @@ def _unmirrored(face: np.ndarray, width: int) -> np.ndarray:
 
 
 def _averaged(face: np.ndarray, mirrored: list[np.ndarray]) -> np.ndarray:
-    """A face's (478, 2) landmarks, 0-467 averaged with the nearest of the `mirrored` faces' within SAME_FACE_PX."""
+    """A face's (478, 2) landmarks, 0-467 averaged with the nearest of the `mirrored` faces' where
+    their landmarks lie a median under SAME_FACE of the face's size (its landmarks' larger extent) apart."""
     apart = [float(np.median(np.linalg.norm(face[:N_LANDMARKS] - other, axis=1))) for other in mirrored]
-    if not apart or min(apart) > SAME_FACE_PX:
+    if not apart or min(apart) > SAME_FACE * np.ptp(face[:N_LANDMARKS], axis=0).max():
         return face
     face = face.copy()
     face[:N_LANDMARKS] = 0.5 * (face[:N_LANDMARKS] + mirrored[int(np.argmin(apart))])
