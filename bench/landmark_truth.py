@@ -2,7 +2,7 @@
 design finds them) against their true places (mm), one JSON line per subject, then the medians per
 kind. ICT subjects (all 100 modes of ../shared's model) as framed captures or turned head meshes,
 template-made subjects as captures (any pose). With --single each face is read once, on the image
-alone, not averaged with the mirror image's reading (`landmarks.facemesh.detect`).
+alone: no reading of the mirror image is taken as the same face (`landmarks.facemesh.SAME_FACE_SHARE`).
 
 Usage: .venv/bin/python bench/landmark_truth.py [--single] capture:9000 mesh:9000 template:0 ...
 """
@@ -27,7 +27,7 @@ def errors(scan, truth: np.ndarray) -> dict:
     e = np.linalg.norm(landmarks.points - truth[landmarks.template_index], axis=1)
     inliers = landmarks.confidence > 0.5
     return {"path": landmarks.path, "count": len(e), "mean_mm": float(e.mean()), "median_mm": float(np.median(e)),
-            "inliers_mean_mm": float(e[inliers].mean())}
+            "inliers_mean_mm": float(e[inliers].mean()) if inliers.any() else None}
 
 
 def main() -> None:
@@ -36,7 +36,7 @@ def main() -> None:
     ap.add_argument("subjects", nargs="+", help="kind:seed, kind capture, mesh or template")
     args = ap.parse_args()
     if args.single:
-        facemesh.detect = facemesh._detect
+        facemesh.SAME_FACE_SHARE = -1.0
     medians = defaultdict(list)
     for spec in args.subjects:
         kind, seed = spec.split(":")

@@ -5,7 +5,8 @@ Each case: the scan (default the shared fran.obj) turned by `Rotation.random(i)`
 ~0.3 m, written in m, mm or cm as OBJ (with its texture), PLY or STL (no texture), then
 `pipeline.design`. Printed: the seal curve's distance to the original's (turned back, mm), the rim
 gap, leak and safe window, and the headgear force set and the awake peak pressure against the
-original's (how much the fit's figures move when only the scan's pose, unit or format changes).
+original's (how much the fit's figures move when only the scan's pose, unit or format changes),
+and the design's quality flags.
 
 Usage: .venv/bin/python bench/orientation.py [--cases 9] [--mask nasal] [--scan FILE]
 (the default scan needs ../shared)
@@ -42,8 +43,9 @@ def main() -> None:
     print(f"original: headgear force {force:.2f} N, awake peak {peak:.2f} kPa")
     mesh = trimesh.load(args.scan, force="mesh", process=False)
     mesh.vertices = mesh.vertices * (MM_PER_UNIT[original.units] / 1000.0)  # metres
-    print("| case | unit | format | seal vs original: mean | max (mm) | rim gap max (mm) | leak (L/min) | window | headgear force (N) | awake peak (kPa) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print(f"original flags: {flags(first)}")
+    print("| case | unit | format | seal vs original: mean | max (mm) | rim gap max (mm) | leak (L/min) | window | headgear force (N) | awake peak (kPa) | flags |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for i in range(args.cases):
         turn = Rotation.random(random_state=i).as_matrix()
         shift = np.random.default_rng(i).normal(0.0, 0.3, 3)  # metres
@@ -64,7 +66,12 @@ def main() -> None:
         fit = custom.summary()
         print(f"| {i} | {unit} | {suffix} | {apart.mean():.2f} | {apart.max():.2f} | {d.rim.summary()['rim_gap_max_mm']:.2f} | "
               f"{fit['leak_l_min']:.2f} | {fit['window_fraction']:.2f} | {custom.force_n:.2f} ({custom.force_n / force - 1:+.1%}) | "
-              f"{fit['pressure_max_kpa']:.2f} ({fit['pressure_max_kpa'] / peak - 1:+.1%}) |", flush=True)
+              f"{fit['pressure_max_kpa']:.2f} ({fit['pressure_max_kpa'] / peak - 1:+.1%}) | {flags(d)} |", flush=True)
+
+
+def flags(d) -> str:
+    """The design's quality flags (the gates past their flag limits: "rescan advised"), by code."""
+    return " ".join(g.code for g in d.quality.flags) or "none"
 
 
 if __name__ == "__main__":

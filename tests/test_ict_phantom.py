@@ -11,7 +11,7 @@ from cpapfit.ict import LOWER_INNER_LIP, ict_face, load_ict, template_on_ict
 from cpapfit.synthetic.ict_phantom import ict_head_mesh, make_ict_phantom, scene
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import phantom_files
-from cpapfit.landmarks.facemesh import _unmirrored, detect
+from cpapfit.landmarks.facemesh import _detect, _unmirrored, detect
 from cpapfit.synthetic.camera import to_camera
 from cpapfit.render import raycast
 from cpapfit.rgbd import project
@@ -92,14 +92,18 @@ def test_mediapipe_finds_the_face(seed):
 
 
 def test_a_mirror_image_reads_as_the_face_mirrored():
-    """A face is read on the image and on its mirror image and the two readings averaged, so the
-    mirror image's landmarks, reflected and each taken from its mirror partner, are the image's
-    own (to 1e-9 px): the pairing of partners and the reflection are right. One reading alone
-    differs from its mirror image's by pixels."""
+    """A face is read on the image and on its mirror image. One reading of the mirror image,
+    reflected and each landmark taken from its mirror partner, lies a median 0.5-3 px from the
+    image's own (a landmark paired with any other lies tens of px away; seeds 0-7 of the shipped
+    model: 0.5-2.4 px); their average is the landmarks `detect` gives, so the mirror image gives the
+    image's own landmarks (to 1e-9 px)."""
     image = make_ict_phantom(3).image
+    mirror = np.ascontiguousarray(image[:, ::-1])
+    once, mirrored_once = _detect(image)[0][:468], _unmirrored(_detect(mirror)[0], image.shape[1])
+    assert 0.5 < np.median(np.linalg.norm(once - mirrored_once, axis=1)) < 3.0
     face = detect(image)[0][:468]
-    back = _unmirrored(detect(np.ascontiguousarray(image[:, ::-1]))[0], image.shape[1])
-    assert np.abs(back - face).max() < 1e-9
+    assert np.abs(face - 0.5 * (once + mirrored_once)).max() < 1e-9
+    assert np.abs(_unmirrored(detect(mirror)[0], image.shape[1]) - face).max() < 1e-9
 
 
 def test_a_head_mesh_with_insides_holds_its_truth():
