@@ -39,8 +39,9 @@ def test_a_hole_over_the_nose_tip_leaves_the_nose_found(tmp_path):
 def test_a_face_whose_upper_lip_stands_nearly_as_far_out_as_its_nose_is_a_face(tmp_path):
     """ICT subject 14 (the shipped model) as a framed capture: 20 mm below its nose tip (in the face's
     true frame) the upper lip stands 7.3 mm under the tip's height, within 8 mm, so a probe of the
-    lip alone reads this nose as no nose and would refuse the face its image shows. The deepest of the scan 20-40 mm below (the mouth's line) lies well below the tip, and
-    the detection is kept, within 6 mm (mean over the mask region) of where the template truly lies."""
+    lip alone reads this nose as no nose and would refuse the face its image shows. The deepest of
+    the scan 20-40 mm below (the mouth's line) lies well below the tip, and the detection is kept,
+    within 6 mm (mean over the mask region) of where the template truly lies."""
     from cpapfit.align.check import first_surface, nose_peak
     from cpapfit.similarity import fit_similarity
     from cpapfit.synthetic.ict_phantom import make_ict_phantom

@@ -65,9 +65,13 @@ def _forget_import_errors(package: str) -> None:
 def detect(image: np.ndarray) -> list[np.ndarray]:
     """Faces in an (H, W, 3) uint8 RGB image: a list of (478, 2) pixel coordinates (u, v), centre-based;
     landmarks 0-467 averaged with the mirror image's reading of the same face where it finds one
-    (`_averaged`; the irises as read on the image)."""
+    (`_averaged`; the irises as read on the image). The mirror image is read only where the image
+    shows a face (most of a mesh's axis views and turns show none)."""
+    faces = _detect(image)
+    if not faces:
+        return []
     mirrored = [_unmirrored(face, image.shape[1]) for face in _detect(np.ascontiguousarray(image[:, ::-1]))]
-    return [_averaged(face, mirrored) for face in _detect(image)]
+    return [_averaged(face, mirrored) for face in faces]
 
 
 def _unmirrored(face: np.ndarray, width: int) -> np.ndarray:
