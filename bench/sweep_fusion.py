@@ -9,7 +9,7 @@ for both masks: rescan advised, the seal over scanned skin, wall time and CPU se
 sys, which a busy machine inflates less than the wall time), the load average before and after;
 designed twice, the two output folders compared file by file.
 
-    .venv/bin/python bench/sweep_fusion.py [--seeds 5] [--frames 9] [--real] [--no-synthetic]
+    .venv/bin/python bench/sweep_fusion.py [--seeds 5] [--first 1] [--frames 9] [--real] [--no-synthetic]
 """
 
 import argparse
@@ -90,6 +90,7 @@ def differing(a: Path, b: Path) -> list[str]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--first", type=int, default=1, help="the first seed")
     ap.add_argument("--frames", type=int, default=9)
     ap.add_argument("--real", action="store_true", help="also design the shared real sweep (both masks, nasal twice)")
     ap.add_argument("--no-synthetic", action="store_true", help="skip the synthetic sweeps")
@@ -98,11 +99,18 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         print("| seed | frames | fused | fuse s | surface median | p95 | bands median | p95 | design from sweep: band mean | p95 | from frontal frame: mean | p95 |")
         print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-        for seed in range(1, 0 if args.no_synthetic else args.seeds + 1):
+        rows = []
+        for seed in range(args.first, args.first + (0 if args.no_synthetic else args.seeds)):
             r = synthetic_row(seed, args.frames, Path(tmp))
+            rows.append(r)
             print(f"| {seed} | {r['frames']} | {r['note']} | {r['fuse_s']:.1f} | {r['median']:.3f} | {r['p95']:.3f} | "
                   f"{r['band_median']:.3f} | {r['band_p95']:.3f} | {r['sweep_band_mean']:.3f} | {r['sweep_band_p95']:.3f} | "
                   f"{r['frame_band_mean']:.3f} | {r['frame_band_p95']:.3f} |", flush=True)
+        if rows:
+            sweep, frame = (np.array([r[k] for r in rows]) for k in ("sweep_band_mean", "frame_band_mean"))
+            print(f"design from the sweep nearer the truth than from the frontal frame on {int((sweep < frame).sum())} of "
+                  f"{len(rows)}; band mean over the seeds {sweep.mean():.3f} mm against {frame.mean():.3f} (the sweep's minus "
+                  f"the frame's: mean {(sweep - frame).mean():+.3f} mm, standard deviation {(sweep - frame).std(ddof=1) if len(rows) > 1 else 0:.3f})")
         if args.real and REAL.is_dir():
             for mask in ("nasal", "oronasal"):
                 print(real_row(mask, Path(tmp) / mask), flush=True)

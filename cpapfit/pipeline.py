@@ -13,6 +13,7 @@ from .align.initial import initial_alignment, landmark_free_alignment
 from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
 from .clustering import thinned
+from .crop import mesh_scan_near
 from .cushion.contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
 from .cushion.solid import cushion_sheet, membrane_sheet
@@ -59,10 +60,23 @@ def align(scan: Scan, user_landmarks: Landmarks | None = None, landmark_noise: L
 
 
 def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
-    """Stage nonrigid: the similarity-aligned template warped onto the scan."""
+    """Stage nonrigid: the similarity-aligned template warped onto the scan (a fused sweep's face:
+    `registered_part`)."""
     template = load_template()
     basis = template_basis(params.morphable.modes) if params.morphable else None
-    return register(alignment.similarity.apply(template.vertices), template.faces, scan, alignment.landmarks, params, template.mirror, basis)
+    aligned = alignment.similarity.apply(template.vertices)
+    return register(aligned, template.faces, registered_part(scan, aligned, alignment.similarity.scale, params), alignment.landmarks,
+                    params, template.mirror, basis)
+
+
+def registered_part(scan: Scan, aligned: np.ndarray, scale: float, params: NonrigidParams = NonrigidParams()) -> Scan:
+    """The part of a scan the template is registered on: a fused sweep's triangles within
+    `params.fused_reach_mm` x `scale` of the centre of the mask region of the (N, 3) mm `aligned`
+    template (the sides and back of the head, which a sweep covers and the template does not model
+    as they are, pull its face about: `bench/RESULTS.md` section 19); any other scan whole."""
+    if not scan.fused_frames or params.fused_reach_mm is None:
+        return scan
+    return mesh_scan_near(scan, aligned[mask_region(load_template())].mean(axis=0), params.fused_reach_mm * scale)
 
 
 @lru_cache(maxsize=1)

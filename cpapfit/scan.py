@@ -71,6 +71,7 @@ class Scan:
     source: the path the scan was read from.
     units: the unit the input was in (a key of `io.units.MM_PER_UNIT`: "mm", "cm", "m", "um" or "in").
     units_note: how that unit was decided, in words.
+    fused_frames: how many depth frames were fused into this mesh (a sweep), 0 for any other scan.
     A capture (depth given) carries valid, pixel_vertex and intrinsics of its depth image's size,
     pixel_vertex naming each vertex once at exactly the valid pixels, -1 elsewhere (ValueError otherwise).
     """
@@ -89,6 +90,7 @@ class Scan:
     valid: np.ndarray | None = None
     pixel_vertex: np.ndarray | None = None
     intrinsics: Intrinsics | None = None
+    fused_frames: int = 0
 
     def __post_init__(self):
         _require_capture_parts(self)

@@ -8,13 +8,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from cpapfit.align.nonrigid import NonrigidParams
 from cpapfit.errors import InputError
 from cpapfit.fusion import Frame, FusionParams, fuse
 from cpapfit.synthetic.ict_sweep import make_ict_sweep
 from cpapfit.io import load_scan
 from cpapfit.io.phantom import write_sweep
 from cpapfit.io.rsbag import read_bag
-from cpapfit.io.sweep import read_frames
+from cpapfit.io.sweep import frame_folders, read_frames
+from cpapfit.pipeline import align, registered_part
 from cpapfit.synthetic.accuracy import surface_distance
 from cpapfit.scan import Intrinsics
 from cpapfit.template import load_template, mask_region
@@ -78,6 +80,26 @@ def test_only_the_head_is_fused_round_where_the_cameras_look(sweep):
     assert np.linalg.norm(sweep[0].surface - centre, axis=1).max() > 95.0
     band = surface_distance(sweep[0].surface, fused.vertices, fused.faces)[mask_region(load_template())]
     assert np.percentile(band, 95) < 1.0
+
+
+def test_a_fused_sweep_is_registered_on_its_face_and_not_the_rest_of_the_head(sweep, sweep_dir, fused):
+    """The template is registered on the fused triangles within 90 mm (times the face's scale) of
+    its mask region's centre: every vertex of that part lies within it, the part still covers the
+    true face's contact bands (p95 under 1 mm) and leaves out the fused surface beyond, which
+    reaches 15 mm further; one frame's capture is registered whole."""
+    al = align(fused)
+    aligned = al.similarity.apply(load_template().vertices)
+    part = registered_part(fused, aligned, al.similarity.scale)
+    reach = NonrigidParams().fused_reach_mm * al.similarity.scale
+    centre = aligned[mask_region(load_template())].mean(axis=0)
+    assert fused.fused_frames == 4
+    assert np.linalg.norm(part.vertices - centre, axis=1).max() <= reach
+    assert np.linalg.norm(fused.vertices - centre, axis=1).max() > reach + 15.0
+    assert len(part.colors) == len(part.normals) == len(part.vertices) and part.faces.max() == len(part.vertices) - 1
+    band = surface_distance(sweep[0].surface, part.vertices, part.faces)[mask_region(load_template())]
+    assert np.percentile(band, 95) < 1.0
+    one = load_scan(frame_folders(sweep_dir)[0])
+    assert one.fused_frames == 0 and registered_part(one, aligned, al.similarity.scale) is one
 
 
 def test_frames_without_depth_and_of_another_scene_are_dropped_with_a_note(sweep):

@@ -80,7 +80,10 @@ SHARE_DECIMALS = 6
 class NonrigidParams:
     """The paper's values are the defaults. correspondence: "auto" (grid for captures), "grid" or "kdtree";
     symmetry: the mirror term's weight per vertex pair at the stiffest level (0: none), its plane read
-    off the scan points within symmetry_near_mm of the affine start."""
+    off the scan points within symmetry_near_mm of the affine start; fused_reach_mm: a fused sweep,
+    which covers the head from ear to ear, is registered on its triangles within this distance (mm,
+    times the similarity's scale) of the similarity-placed mask region's centre (None: all of it;
+    `pipeline.register_template`)."""
 
     point_to_point: float = 0.1
     point_to_plane: float = 1.0
@@ -102,6 +105,7 @@ class NonrigidParams:
     coarse_gates: tuple[float, float] | None = (15.0, 60.0)
     symmetry: float = 1.0
     symmetry_near_mm: float = 8.0
+    fused_reach_mm: float | None = 90.0
 
 
 @dataclass(frozen=True)

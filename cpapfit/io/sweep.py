@@ -71,7 +71,7 @@ def fused_scan(frames, scales: set[float], source: Path) -> Scan:
     return Scan(
         vertices=fused.vertices, faces=faces, normals=normals, source=str(source), units="mm",
         units_note=f"units: millimetres, from depth_scale {scale} units per metre; {fused.note()}",
-        colors=fused.colors,
+        colors=fused.colors, fused_frames=len(fused.kept),
     )
 
 
