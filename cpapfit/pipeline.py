@@ -72,8 +72,9 @@ def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams =
 def registered_part(scan: Scan, aligned: np.ndarray, scale: float, params: NonrigidParams = NonrigidParams()) -> Scan:
     """The part of a scan the template is registered on: a fused sweep's triangles within
     `params.fused_reach_mm` x `scale` of the centre of the mask region of the (N, 3) mm `aligned`
-    template (the sides and back of the head, which a sweep covers and the template does not model
-    as they are, pull its face about: `bench/RESULTS.md` section 19); any other scan whole."""
+    template: a sweep covers the sides of the head, which no single frame sees and the template does
+    not reach, and registered on them too its face lands farther from the truth (`bench/RESULTS.md`
+    section 19); any other scan whole."""
     if not scan.fused_frames or params.fused_reach_mm is None:
         return scan
     return mesh_scan_near(scan, aligned[mask_region(load_template())].mean(axis=0), params.fused_reach_mm * scale)
