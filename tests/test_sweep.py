@@ -102,6 +102,18 @@ def test_a_fused_sweep_is_registered_on_its_face_and_not_the_rest_of_the_head(sw
     assert one.fused_frames == 0 and registered_part(one, aligned, al.similarity.scale) is one
 
 
+def test_frames_named_with_unpadded_numbers_are_fused_in_their_numbers_order(sweep_dir, fused, tmp_path):
+    """The sweep's four frames renamed frame_8 to frame_11 (by name, frame_10 would come first)
+    fuse to the very same surface as the folder as written."""
+    renamed = tmp_path / "renamed"
+    renamed.mkdir()
+    for k, folder in enumerate(frame_folders(sweep_dir)):
+        shutil.copytree(folder, renamed / f"frame_{8 + k}")
+    assert [p.name for p in frame_folders(renamed)] == ["frame_8", "frame_9", "frame_10", "frame_11"]
+    again = load_scan(renamed)
+    assert again.vertices.shape == fused.vertices.shape and np.array_equal(again.vertices, fused.vertices)
+
+
 def test_frames_without_depth_and_of_another_scene_are_dropped_with_a_note(sweep):
     """Frame 1 with no depth, a frame of a tilted wall put in after frame 2: both dropped, each said
     why; the rest fused (a coarse volume, for time) onto the true face."""

@@ -1,4 +1,4 @@
-"""Sweeps: a folder of capture folders (frames in the order of their names), fused into one mesh scan.
+"""Sweeps: a folder of capture folders (frames in the order of their names, numbers read as numbers), fused into one mesh scan.
 
 A sweep holds no color.png, depth.png or intrinsics.json of its own; each subfolder that does is a
 frame (other subfolders, such as a synthetic sweep's ground_truth/, are not). The frames are one
@@ -6,6 +6,7 @@ camera: one resolution and one set of intrinsics. The fusion itself is `cpapfit.
 RealSense recording (`rsbag.py`) is fused here too.
 """
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +32,16 @@ def is_sweep(path: Path) -> bool:
 
 
 def frame_folders(folder: Path) -> list[Path]:
-    """The sweep's frame folders, in the order of their names."""
-    return sorted((p for p in Path(folder).iterdir() if is_frame(p)), key=lambda p: p.name)
+    """The sweep's frame folders, in the order of their names, numbers within them read as numbers
+    (`frame_2` before `frame_10`, as `frame_02` before `frame_10`)."""
+    return sorted((p for p in Path(folder).iterdir() if is_frame(p)), key=lambda p: _in_order(p.name))
+
+
+def _in_order(name: str) -> tuple:
+    """A sort key of a name: its runs of digits as numbers (then as written, so that `2` and `02`
+    keep one order), the rest as text."""
+    parts = re.split(r"(\d+)", name)
+    return tuple((int(part), part) if k % 2 else (-1, part) for k, part in enumerate(parts))
 
 
 def read_frames(folder: Path):
