@@ -26,13 +26,13 @@ import numpy as np
 import trimesh
 
 from cpapfit import __version__
+from cpapfit.align.nonrigid import NonrigidParams
 from cpapfit.synthetic.ict_sweep import make_ict_sweep
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.phantom import write_sweep
 from cpapfit.io.write import write_files
 from cpapfit.synthetic.accuracy import surface_distance
-from cpapfit.align.nonrigid import NonrigidParams
 from cpapfit.pipeline import place_template
 from cpapfit.template import load_template, mask_region
 

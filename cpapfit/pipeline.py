@@ -74,10 +74,11 @@ def registered_part(scan: Scan, aligned: np.ndarray, scale: float, params: Nonri
     `params.fused_reach_mm` x `scale` of the centre of the mask region of the (N, 3) mm `aligned`
     template: a sweep covers the sides of the head, which no single frame sees and the template does
     not reach, and registered on them too its face lands farther from the truth (`bench/RESULTS.md`
-    section 19); any other scan whole."""
+    section 19); any other scan whole, and a sweep whole where no triangle lies that near."""
     if not scan.fused_frames or params.fused_reach_mm is None:
         return scan
-    return mesh_scan_near(scan, aligned[mask_region(load_template())].mean(axis=0), params.fused_reach_mm * scale)
+    part = mesh_scan_near(scan, aligned[mask_region(load_template())].mean(axis=0), params.fused_reach_mm * scale)
+    return part if len(part.faces) else scan
 
 
 @lru_cache(maxsize=1)

@@ -83,7 +83,7 @@ class NonrigidParams:
     off the scan points within symmetry_near_mm of the affine start; fused_reach_mm: a fused sweep,
     which covers the head from ear to ear, is registered on its triangles within this distance (mm,
     times the similarity's scale) of the similarity-placed mask region's centre (None: all of it;
-    `pipeline.register_template`)."""
+    `pipeline.registered_part`)."""
 
     point_to_point: float = 0.1
     point_to_plane: float = 1.0
@@ -205,7 +205,7 @@ def morphable_share(product: float, blend: tuple[float, float]) -> float:
     distance is `product` times the affine run's: 1 under blend[0], 0 over blend[1] (or where the
     product is not a number: neither run paired), easing between them (smoothstep, continuous with
     its slope). ICT faces, not made from the template, read 0.12-0.85 and template-made ones
-    0.93-1.34 (`bench/RESULTS.md` section 2); real faces' scans read 0.67-1.03, the same face either
+    0.93-1.34 (`bench/RESULTS.md` section 2); real faces' scans read 0.62-0.98, the same face either
     side of any cut from scan to scan."""
     lo, hi = blend
     if np.isnan(product):
