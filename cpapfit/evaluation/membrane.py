@@ -69,10 +69,17 @@ def face_thickness_mm(mesh: trimesh.Trimesh) -> np.ndarray:
 def vertex_thickness_mm(mesh: trimesh.Trimesh, face_mm: np.ndarray) -> np.ndarray:
     """(V,) mm: at each vertex of a mesh (and its copies at the same place), the least of the (F,)
     thicknesses `face_mm` of its faces."""
-    corner = np.unique(mesh.vertices, axis=0, return_inverse=True)[1].ravel()  # copies of a vertex are one corner
+    corner = _copies(mesh.vertices)
     out = np.full(corner.max() + 1, np.inf)
     np.minimum.at(out, corner[mesh.faces.ravel()], np.repeat(face_mm, 3))
     return out[corner]
+
+
+def _copies(vertices: np.ndarray) -> np.ndarray:
+    """(V,) a label per place of (V, 3) vertices: copies of a vertex (the same three numbers) share one.
+    Each row is compared as its 24 bytes (0.0 for -0.0), a third of the time of `np.unique(axis=0)`."""
+    rows = np.ascontiguousarray(vertices, dtype=np.float64) + 0.0
+    return np.unique(rows.view(np.dtype((np.void, rows.itemsize * 3))).ravel(), return_inverse=True)[1].ravel()
 
 
 def bending_stiffness(thickness: np.ndarray, youngs_kpa: float = SILICONE_KPA, poisson: float = SILICONE_POISSON) -> np.ndarray:
