@@ -39,9 +39,9 @@ def frame_folders(folder: Path) -> list[Path]:
 
 def _in_order(name: str) -> tuple:
     """A sort key of a name: its runs of digits as numbers (then as written, so that `2` and `02`
-    keep one order), the rest as text."""
+    keep one order), the text between them as text (text and digits alternate, from text)."""
     parts = re.split(r"(\d+)", name)
-    return tuple((int(part), part) if k % 2 else (-1, part) for k, part in enumerate(parts))
+    return tuple((int(part), part) if k % 2 else part for k, part in enumerate(parts))
 
 
 def read_frames(folder: Path):
