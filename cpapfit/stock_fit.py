@@ -21,7 +21,7 @@ import trimesh
 
 from .cushion.nurbs import CushionParams
 from .cushion.population import gauge_mm
-from .cushion.stock import BRIDGE, SIZES, mean_face, size_scale, stock_cushion
+from .cushion.stock import BRIDGE, SIZES, mean_face, size_scale, stock_solid
 from .errors import InputError, NoStockSeat
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
@@ -209,7 +209,7 @@ def stock_solids(mask: str, choice: str = "best", params: CushionParams = Cushio
 @lru_cache(maxsize=8)
 def _refined_stock(mask: str, size: str, params: CushionParams) -> tuple[trimesh.Trimesh, np.ndarray]:
     """The stock solid refined for finding its rim, and its vertices' thickness (`rim.refined`)."""
-    return refined(stock_cushion(mask, size, params)[1])
+    return refined(stock_solid(mask, size, params))
 
 
 def placed_stock(mask: str, fit: StockFit, face: Face, params: CushionParams = CushionParams()) -> tuple[trimesh.Trimesh, np.ndarray]:

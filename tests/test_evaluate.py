@@ -9,6 +9,7 @@ from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
 from cpapfit.cushion.envelope import PEAK_MARGIN_KPA, headgear_force
+from cpapfit.evaluation.ceiling import ceilings
 from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_cushion, fit_rim, peak_force, refined_preload, window_force
 from cpapfit.evaluation.leak import leak_l_min
 from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
@@ -691,3 +692,22 @@ def test_a_scan_denser_than_half_a_millimetre_is_pressed_on_thinned_with_the_sam
     assert b["pressure_max_kpa"] == pytest.approx(a["pressure_max_kpa"], abs=0.1)
     assert b["window_fraction"] == pytest.approx(a["window_fraction"], abs=0.02)
     assert a["leak_l_min"] == b["leak_l_min"] == 0.0
+
+
+def test_no_ray_along_the_axis_meets_a_surface_above_its_ceiling():
+    """`ceilings`: from 4000 points over and under a bumpy sheet of long and short triangles, the
+    first surface up and down the axis lies no higher up it than the point's ceiling, and points
+    beside the sheet, which no ray from them can meet, have none."""
+    rng = np.random.default_rng(5)
+    xy = np.vstack([rng.uniform(-20.0, 20.0, (300, 2)), [[-20, -20], [-20, 20], [20, -20], [20, 20]]])
+    sheet = trimesh.Trimesh(np.column_stack([xy, 3.0 * np.sin(xy[:, 0] / 4.0) * np.cos(xy[:, 1] / 5.0)]),
+                            Delaunay(xy).simplices, process=False)
+    axis, plane = np.array([0.0, 0.0, 1.0]), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    points = np.column_stack([rng.uniform(-25.0, 25.0, (4000, 2)), rng.uniform(-6.0, 6.0, 4000)])
+    ceiling = ceilings(points, [sheet], axis, plane)
+    for direction in (axis, -axis):
+        where, ray, _ = sheet.ray.intersects_location(points, np.broadcast_to(direction, points.shape), multiple_hits=False)
+        assert len(ray) > 1000
+        assert np.all(where[:, 2] <= ceiling[ray])
+    beside = np.any(np.abs(points[:, :2]) > 21.0, axis=1)
+    assert beside.sum() > 500 and np.all(ceiling[beside] == -np.inf)

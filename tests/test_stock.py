@@ -6,17 +6,18 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from cpapfit.cushion.generic import AXIS, NOSE_TIP, UP, contact_on
-from cpapfit.cushion.nurbs import design_cushion
+from cpapfit.cushion.nurbs import CushionParams, design_cushion
 from cpapfit.cushion.contact import SAMPLES
 from cpapfit.cushion.population import POPULATION, drawn, population, population_gauge
-from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, set_back, size_scale, stock_cushion
+from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, set_back, size_scale, stock_cushion, stock_solid
 from cpapfit.cushion.envelope import REACH_MM
 from cpapfit.evaluation.fit import KPA_PER_CMH2O, Face
+from cpapfit.evaluation import rim
 from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm, reach_mm
 from cpapfit.evaluation.states import CPAP_RANGE_CMH2O
 from cpapfit.errors import InputError
 from cpapfit.report.page import cushion_label, settings_line
-from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, compared_stock, gauge_size, seated
+from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, _placed, _refined_stock, compared_stock, gauge_size, seated
 from cpapfit.template import load_template
 
 
@@ -28,13 +29,23 @@ def face_scaled(scale: np.ndarray) -> Face:
 
 
 def test_the_shipped_population_is_a_fresh_draw():
-    """The shipped figures (`tools/build_stock_population.py`) are those the ICT model and the
+    """The shipped figures (`tools/build_stock_family.py`) are those the ICT model and the
     template give now: every gauge measure and seal depth within 1e-9 mm."""
     fresh = drawn()
     for mask, (gauge, depth) in population().items():
         assert gauge.shape == (POPULATION,) and depth.shape == (POPULATION, SAMPLES)
         np.testing.assert_allclose(gauge, fresh[mask][0], rtol=0, atol=1e-9)
         np.testing.assert_allclose(depth, fresh[mask][1], rtol=0, atol=1e-9)
+
+
+def test_the_shipped_solids_are_those_made_afresh():
+    """Every size's shipped solid (`tools/build_stock_family.py`) is the one `stock_cushion` makes
+    now from the shipped population: the same triangles, every vertex within 1e-9 mm."""
+    for mask, sizes in SIZES.items():
+        for size in sizes:
+            shipped, fresh = stock_solid(mask, size), stock_cushion(mask, size)[1]
+            assert np.array_equal(shipped.faces, fresh.faces), (mask, size)
+            np.testing.assert_allclose(shipped.vertices, fresh.vertices, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("mask", ["nasal", "oronasal"])
@@ -151,3 +162,22 @@ def test_with_no_worker_the_stock_sizes_press_on_the_faces_already_made(monkeypa
         for a, b in zip(ours, theirs):
             assert a.fits.keys() == b.fits.keys()
             assert all(a.fits[k].summary() == b.fits[k].summary() for k in a.fits)
+
+
+@pytest.mark.parametrize("offset", [(0.0, 0.0), (2.0, -2.0), (-1.0, 3.0)])
+def test_the_rays_the_ceiling_spares_change_no_rim_point(monkeypatch, offset):
+    """`rim_in` casts rays from the wall higher than SURE_MM over its sector's lowest only where the
+    skin's ceiling (`evaluation.ceiling`) says they could touch first: the stock nasal M cushion,
+    moved across the axis over a face whose scan is not its registered template, finds the same rim
+    to the bit as casting from every vertex of the band."""
+    scan = face_scaled(np.array([1.06, 0.95, 1.12])).scan
+    face = Face(scan, trimesh.Trimesh(mean_face(), load_template().faces, process=False), np.array([0.0, 0.0, 1.0]),
+                np.array([0.0, 1.0, 0.0]))
+    mesh, thickness = _refined_stock("nasal", "M", CushionParams())
+    across = trimesh.transformations.translation_matrix(np.asarray(offset) @ rim.in_plane(face.axis, face.up))
+    zone = rim.rim_zone(_placed(mesh, face, np.zeros(2)), face.axis, face.up, thickness).moved(across)
+    spared = rim.rim_in(zone, face.scan, face.registered, face.axis, face.up)
+    monkeypatch.setattr(rim, "SURE_MM", rim.RIM_BAND_MM)
+    every = rim.rim_in(zone, face.scan, face.registered, face.axis, face.up)
+    for name in every.__dataclass_fields__:
+        assert np.array_equal(np.asarray(getattr(spared, name)), np.asarray(getattr(every, name)), equal_nan=True), name

@@ -3,7 +3,7 @@ shipped ICT model (seed 0), each read for both masks by the sizing gauge's measu
 and by the depth of the template seal curve's points along the mask axis (`seal_depth`).
 
 The figures depend on no scan, so they are shipped (data/stock_population.npz, written by
-`tools/build_stock_population.py`) rather than drawn at every start; the tests check the shipped
+`tools/build_stock_family.py`) rather than drawn at every start; the tests check the shipped
 figures against a fresh draw.
 """
 

@@ -18,6 +18,7 @@ the SIZE_PERCENTILES of that measure over its median; a nasal "W" (wide) is M ma
 Template frame (mm): x to the face's left, y up, z out of it.
 """
 
+import io
 from functools import lru_cache
 
 import numpy as np
@@ -25,6 +26,7 @@ import trimesh
 
 from ..frozen import read_only
 from ..ict import ict_face, load_ict, template_truth
+from ..shipped import npz
 from ..template import load_template
 from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
@@ -61,6 +63,27 @@ def size_scale(mask: str, size: str) -> np.ndarray:
     if size == "W":
         return np.array([ratio["L"], 1.0, 1.0])
     return np.full(3, ratio[size])
+
+
+SOLIDS_FILE = "stock_solids.npz"
+
+
+def stock_solid(mask: str, size: str, params: CushionParams = CushionParams()) -> trimesh.Trimesh:
+    """The solid (with its membrane) of the stock `size` of a `mask`, template frame, mm: as shipped
+    (`solids_bytes`, the same to the bit) for the default `params`, else `stock_cushion`'s."""
+    if params != CushionParams() or size not in SIZES.get(mask, ()):
+        return stock_cushion(mask, size, params)[1]
+    data = npz(__package__, SOLIDS_FILE)
+    return trimesh.Trimesh(data[f"{mask}_{size}_vertices"], data[f"{mask}_{size}_faces"], process=False)
+
+
+def solids_bytes() -> bytes:
+    """The .npz file of every stock size's solid made afresh (`stock_cushion`, default parameters), as shipped."""
+    out = io.BytesIO()
+    solids = {(mask, size): stock_cushion(mask, size)[1] for mask in SIZES for size in SIZES[mask]}
+    np.savez_compressed(out, **{f"{mask}_{size}_{name}": array for (mask, size), solid in solids.items()
+                                for name, array in (("vertices", solid.vertices), ("faces", solid.faces))})
+    return out.getvalue()
 
 
 @lru_cache(maxsize=8)

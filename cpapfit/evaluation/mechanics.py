@@ -136,9 +136,20 @@ def _equilibrium(clearance, cos, area_mm2, k, uv, sealed_area_mm2, force_n, cpap
         stiff = np.where(a > 0, spring, 0.0) + np.where((a > 0) & (a < ease), pull / ease, 0.0)
         return (basis.T * stiff) @ basis + ridge
 
-    x = minimize(energy, np.array([touch, 0.0, 0.0]), jac=True, hess=hessian, method="trust-exact",
+    x = minimize(energy, np.array([_settled(clearance, spring, net), 0.0, 0.0]), jac=True, hess=hessian, method="trust-exact",
                  options={"gtol": 1e-9 * max(net, 1.0)}).x
     return _pressed(basis @ x - clearance, cos, k, cpap_kpa, float(x[0] - touch), x[1:], lifted=False)
+
+
+def _settled(clearance: np.ndarray, spring: np.ndarray, net: float) -> float:
+    """mm: the mask's place along the axis where rim points of (K,) `clearance` mm on (K,) `spring`
+    N/mm, none tilted and no flap pulling, carry `net` N (the first touch where it is none): where
+    the minimisation starts, so that its first steps are not spent finding the contact."""
+    order = np.argsort(clearance, kind="stable")
+    c, k = clearance[order], spring[order]
+    stiff, moment = np.cumsum(k), np.cumsum(k * c)
+    j = max(int(np.searchsorted(stiff * c - moment, net, side="right")) - 1, 0)  # points 0..j touch
+    return float(c[0]) if net <= 0 or stiff[j] <= 0 else float((net + moment[j]) / stiff[j])
 
 
 def _pressed(along, cos, k, cpap_kpa, shift, tilt, lifted) -> Pressed:

@@ -14,6 +14,7 @@ measured, per sector, for the seal it adds.
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import chain
 
 import numpy as np
@@ -25,6 +26,7 @@ from ..errors import InputError
 from ..frozen import freeze_arrays
 from ..scan import Scan
 from ..tangents import across
+from .ceiling import ceilings
 from .membrane import MEMBRANE_MAX_MM, face_thickness_mm, rim_membrane, vertex_thickness_mm
 from ..thresholds import MIN_COVERED
 from .mechanics import COS_MIN
@@ -40,6 +42,7 @@ FACE_MM = 4.0  # scanned skin farther than this behind the registered face along
 PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the point and PROBE_RAYS around it
 PROBE_RAYS = 6
 RIM_BAND_MM = 15.0  # a rim point is a wall vertex at most this far up the axis from its sector's lowest
+SURE_MM = 1.0  # rays first from the wall this far up from its sector's lowest; higher, only where they could touch first
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
@@ -159,14 +162,17 @@ def rim_in(
     plane = in_plane(axis, up)
     uv = (vertices - zone.centre) @ plane.T
     sector = _sector(uv, sectors)
-    near = _rim_band(vertices @ axis, sector, sectors)
-    on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
-    on_face[near], face_cos[near] = _height_over(vertices[near], face_mesh, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)
-    height = _touch_heights(vertices, near, on_face, scan, axis)
-    level = np.round(np.where(np.isfinite(height), height, np.inf) / TIE_MM)  # ties (a flange flat on the skin): the inner edge
-    order = np.lexsort((np.linalg.norm(uv, axis=1), level, sector))
-    order = order[near[order]]
-    first = order[np.unique(sector[order], return_index=True)[1]]  # first to touch in each sector
+    along = vertices @ axis
+    low = _lowest(along, sector, np.ones(len(vertices), dtype=bool), sectors)[sector]
+    near = along - low <= RIM_BAND_MM
+    heights = _touch_heights(vertices, near & (along - low <= SURE_MM), scan, face_mesh, axis)
+    level = _level(heights.height)
+    best = np.full(sectors, np.inf)
+    np.minimum.at(best, sector, level)
+    bound = along - ceilings(vertices, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
+    rest = near & (along - low > SURE_MM) & (np.round(bound / TIE_MM) <= best[sector])
+    on_face, face_cos, height = heights.joined(_touch_heights(vertices, rest, scan, face_mesh, axis, heights.out))
+    first = _first_in_sector(np.flatnonzero(near), sector, _level(height), np.linalg.norm(uv, axis=1), sectors)
     if len(first) < sectors or not np.isfinite(height[first]).all():
         raise InputError("the cushion does not run all the way round the mask axis over the face or the scan")
     pts = vertices[first]
@@ -184,19 +190,58 @@ def rim_in(
     return RimContact(pts, skin, clearance, cos, seal_lengths(pts), rim_uv, axis, _area(rim_uv), *membrane)
 
 
-def _touch_heights(vertices: np.ndarray, near: np.ndarray, on_face: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud,
-                   axis: np.ndarray) -> np.ndarray:
-    """(V,) mm: the height along the unit `axis` of each of the `near` (V,) cushion `vertices` (V, 3)
-    over the skin (negative: inside it; NaN off `near`), which orders them by first touch: over a
-    mesh scan, its height over the scanned skin (one ray: the rim point's clearance is then read as
-    the median of a few, `skin_under`; skin past the registered face's edge, within REACH_MM, is
-    skin), unless that ray meets no skin or goes through a hole (`_through_hole`); else, and over a
-    point cloud, its height over the registered face, `on_face` (V,) mm."""
+def _first_in_sector(candidates: np.ndarray, sector: np.ndarray, level: np.ndarray, radius: np.ndarray, sectors: int) -> np.ndarray:
+    """The first to touch in each sector that has any of the (C,) increasing vertex indices
+    `candidates`, in sector order: the least `level` (V,), then the least `radius` (V,) mm, then the
+    least index (`sector` (V,) each vertex's)."""
+    for key in (level, radius):
+        least = np.full(sectors, np.inf)
+        np.minimum.at(least, sector[candidates], key[candidates])
+        candidates = candidates[key[candidates] == least[sector[candidates]]]
+    return candidates[np.unique(sector[candidates], return_index=True)[1]]
+
+
+@dataclass(frozen=True)
+class Heights:
+    """Heights along the mask axis of the `cast` (V,) bool of a cushion's V wall vertices, NaN at the
+    others: over the registered face (`on_face` (V,) mm, its normal . axis `face_cos` (V,)) and over
+    the skin (`height` (V,) mm, negative inside it: what orders them by first touch); `out` (mesh,
+    scan) the sides the surfaces' hits face (`_height_over`)."""
+
+    cast: np.ndarray
+    on_face: np.ndarray
+    face_cos: np.ndarray
+    height: np.ndarray
+    out: tuple
+
+    def joined(self, other: "Heights") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(on_face, face_cos, height) of these vertices and `other`'s."""
+        return tuple(np.where(other.cast, getattr(other, name), getattr(self, name)) for name in ("on_face", "face_cos", "height"))
+
+
+def _touch_heights(vertices: np.ndarray, cast: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh,
+                   axis: np.ndarray, out: tuple = (None, None)) -> Heights:
+    """The `Heights` of the `cast` (V,) bool of the cushion's (V, 3) wall `vertices` along the unit
+    `axis`: over a mesh scan, its height over the scanned skin (one ray: the rim point's clearance is
+    then read as the median of a few, `skin_under`; skin past the registered face's edge, within
+    REACH_MM, is skin), unless that ray meets no skin or goes through a hole (`_through_hole`); else,
+    and over a point cloud, its height over the registered face `face_mesh`; `out`: the sides the
+    hits face where already found."""
+    points, axes = vertices[cast], np.broadcast_to(axis, (int(cast.sum()), 3))
+    on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
+    on_face[cast], face_cos[cast], face_out = _height_over(points, face_mesh, axes, REACH_MM, out[0])
     if not isinstance(scan, trimesh.Trimesh):
-        return on_face
+        return Heights(cast, on_face, face_cos, on_face, (face_out, None))
     on_scan = np.full(len(vertices), np.nan)
-    on_scan[near] = _height_over(vertices[near], scan, np.broadcast_to(axis, (int(near.sum()), 3)), REACH_MM)[0]
-    return np.where(np.isfinite(on_scan) & ~_through_hole(on_scan, on_face), on_scan, on_face)
+    on_scan[cast], _, scan_out = _height_over(points, scan, axes, REACH_MM, out[1])
+    height = np.where(np.isfinite(on_scan) & ~_through_hole(on_scan, on_face), on_scan, on_face)
+    return Heights(cast, on_face, face_cos, height, (face_out, scan_out))
+
+
+def _level(height: np.ndarray) -> np.ndarray:
+    """(V,) heights (mm, NaN: no skin) in steps of TIE_MM, the order of first touch: clearances
+    this close count as equal (a flange flat on the skin: the inner edge is the rim)."""
+    return np.round(np.where(np.isfinite(height), height, np.inf) / TIE_MM)
 
 
 def _through_hole(on_scan: np.ndarray, on_face: np.ndarray) -> np.ndarray:
@@ -220,20 +265,35 @@ def _lowest(height: np.ndarray, sector: np.ndarray, wall: np.ndarray, sectors: i
     return low
 
 
-def _rim_band(height: np.ndarray, sector: np.ndarray, sectors: int) -> np.ndarray:
-    """(V,) bool: the wall vertices at most RIM_BAND_MM above the lowest of their sector (`height`
-    (V,) mm along the axis): where a rim can be (higher up, the skin would be inside the cushion's
-    wall), the only vertices that look for the skin."""
-    return height - _lowest(height, sector, np.ones(len(height), dtype=bool), sectors)[sector] <= RIM_BAND_MM
-
-
 def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
     """(the cushion mesh with no edge longer than REFINE_MM (a refined mesh is its own refinement),
     its (V,) thickness mm: at a closed cushion's own vertices `vertex_thickness_mm` of its faces'
     `face_thickness_mm`; at a vertex made by refining, the least over the faces it lies on of the
     most of their source face's corners. A face across a sheet's end (a flap's free edge, whose
     own ray runs along the flap) is as thin as its corners, which lie on the flap's two sides;
-    inf on an open sheet)."""
+    inf on an open sheet). The last two cushions' are kept: a design evaluates its cushion awake
+    and then presses the same cushion asleep (not to be changed: they are shared)."""
+    return _refined(_Content(cushion))
+
+
+class _Content:
+    """A mesh that hashes and compares by its vertices and faces."""
+
+    def __init__(self, mesh: trimesh.Trimesh):
+        self.mesh = mesh
+        self.key = (np.asarray(mesh.vertices).tobytes(), np.asarray(mesh.faces).tobytes())
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _Content) and self.key == other.key
+
+
+@lru_cache(maxsize=2)
+def _refined(content: _Content) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """`refined` of `content`'s mesh."""
+    cushion = content.mesh
     face = face_thickness_mm(cushion) if cushion.is_watertight else np.full(len(cushion.faces), np.inf)
     corner = vertex_thickness_mm(cushion, face)
     points = cushion.vertices[cushion.faces]
@@ -273,19 +333,21 @@ def spacing(tree: cKDTree, sample: int = 2000) -> float:
     return float(np.median(tree.query(points, k=2)[0][:, 1]))
 
 
-def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float):
+def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float, out: float | None = None):
     """(height (V,) mm each of (V, 3) points lies above the skin along its unit axis (V, 3), NaN where
-    no skin within `reach`; that skin's normal . axis (V,)). Inside the skin (the first surface up
+    no skin within `reach`; that skin's normal . axis (V,); out). Inside the skin (the first surface up
     its axis faces out, up the axis) the height is minus the depth to it; else it is the height over
     the first surface below. A point in the air under an overhang (the wing of the nose over the
-    groove beside it) is over the groove, not inside the wing. Out is the side most hits face (a
-    mesh wound inside out reads the same)."""
+    groove beside it) is over the groove, not inside the wing. Out (1 or -1, along the normals or
+    against them) is the side most of these hits face unless given (a mesh wound inside out reads
+    the same)."""
     up, up_facing = _first_hit(points, mesh, axes, reach)
     down, down_facing = _first_hit(points, mesh, -axes, reach)
-    out = np.concatenate([up_facing[np.isfinite(up)], -down_facing[np.isfinite(down)]])
-    out = 1.0 if not len(out) or np.median(out) >= 0 else -1.0
+    if out is None:
+        facing = np.concatenate([up_facing[np.isfinite(up)], -down_facing[np.isfinite(down)]])
+        out = 1.0 if not len(facing) or np.median(facing) >= 0 else -1.0
     inside = np.isfinite(up) & (out * up_facing > 0)
-    return np.where(inside, -up, down), np.where(inside, up_facing, -down_facing)
+    return np.where(inside, -up, down), np.where(inside, up_facing, -down_facing), out
 
 
 def _first_hit(points: np.ndarray, mesh: trimesh.Trimesh, directions: np.ndarray, reach: float):
