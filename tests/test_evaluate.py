@@ -704,7 +704,7 @@ def test_no_ray_along_the_axis_meets_a_surface_above_its_ceiling():
                             Delaunay(xy).simplices, process=False)
     axis, plane = np.array([0.0, 0.0, 1.0]), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     points = np.column_stack([rng.uniform(-25.0, 25.0, (4000, 2)), rng.uniform(-6.0, 6.0, 4000)])
-    ceiling = ceilings(points, [sheet], axis, plane)
+    ceiling = ceilings(points @ plane.T, [sheet], axis, plane)
     for direction in (axis, -axis):
         where, ray, _ = sheet.ray.intersects_location(points, np.broadcast_to(direction, points.shape), multiple_hits=False)
         assert len(ray) > 1000

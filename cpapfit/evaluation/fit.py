@@ -117,11 +117,24 @@ def _least_median_most(values: np.ndarray) -> list[float]:
 
 
 def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, cpap_kpa: float,
-               flaps: Flaps | None = None) -> Pressed:
-    """`press` over the covered points of a rim with its membrane (`flaps`: `_flaps(rim, cpap_kpa)`, given or made)."""
+               flaps: Flaps | None = None, near: Pressed | None = None) -> Pressed:
+    """`press` over the covered points of a rim with its membrane (`flaps`: `_flaps(rim, cpap_kpa)`,
+    given or made), from `near` (its equilibrium at another force) where given."""
     c = rim.covered
     return press(rim.clearance[c], rim.cos[c], width_mm * rim.ds[c], k[c], rim.uv[c], rim.sealed_area_mm2, force_n, cpap_kpa,
-                 _flaps(rim, cpap_kpa) if flaps is None else flaps)
+                 _flaps(rim, cpap_kpa) if flaps is None else flaps, near)
+
+
+def _pressing(rim: RimContact, k: np.ndarray, width_mm: float, cpap_kpa: float, flaps: Flaps) -> Callable[[float], Pressed]:
+    """force N -> `_press_rim` of the rim at that force, each search started from the last one's equilibrium."""
+    last = None
+
+    def at(force: float) -> Pressed:
+        nonlocal last
+        last = _press_rim(rim, k, width_mm, force, cpap_kpa, flaps, last)
+        return last
+
+    return at
 
 
 def _flaps(rim: RimContact, cpap_kpa: float) -> Flaps:
@@ -149,9 +162,10 @@ def seal_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     """Least headgear force (N) at which no covered rim point is left open (bisection), or None."""
 
     flaps = _flaps(rim, params.cpap_kpa)
+    pressed = _pressing(rim, k, width_mm, params.cpap_kpa, flaps)
 
     def opened(force: float) -> bool:
-        return _left_open(_press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps), flaps).max() > 0
+        return _left_open(pressed(force), flaps).max() > 0
 
     if opened(params.max_force_n):
         return None
@@ -163,9 +177,10 @@ def peak_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitParam
     harder than `peak_kpa` (bisection: the pressure grows with the force); the least force that
     holds the mask on where even the least contact presses harder."""
     flaps = _flaps(rim, params.cpap_kpa)
+    pressed = _pressing(rim, k, width_mm, params.cpap_kpa, flaps)
 
     def over(force: float) -> bool:
-        return _press_rim(rim, k, width_mm, force, params.cpap_kpa, flaps).pressure_kpa.max() > peak_kpa
+        return pressed(force).pressure_kpa.max() > peak_kpa
 
     if not over(params.max_force_n):
         return params.max_force_n
@@ -177,9 +192,9 @@ def window_force(rim: RimContact, k: np.ndarray, width_mm: float, params: FitPar
     covered rim points press within the safe window; `lo_n` where `hi_n` is no more."""
     if hi_n <= lo_n:
         return lo_n
-    flaps = _flaps(rim, params.cpap_kpa)
+    pressed = _pressing(rim, k, width_mm, params.cpap_kpa, _flaps(rim, params.cpap_kpa))
     forces = np.linspace(lo_n, hi_n, steps + 1)
-    shares = [_window_share(_press_rim(rim, k, width_mm, f, params.cpap_kpa, flaps).pressure_kpa, params.window_kpa) for f in forces]
+    shares = [_window_share(pressed(f).pressure_kpa, params.window_kpa) for f in forces]
     return float(forces[np.argmax(shares)])
 
 

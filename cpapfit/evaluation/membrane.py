@@ -154,13 +154,16 @@ def rim_membrane(vertices: np.ndarray, thickness: np.ndarray, rim: np.ndarray, s
     running, the most of those): a section that cuts a neighbouring flap lengthwise where the rim
     turns reads a few points too wide, never a whole stretch. Width 0 where the section has none."""
     thin = np.flatnonzero(thickness <= MEMBRANE_MAX_MM)
-    owner = cKDTree(rim).query(vertices[thin])[1]
+    points = vertices[thin]
+    owner = cKDTree(rim).query(points)[1]
     tangent = np.roll(rim, -TANGENT_STEP, axis=0) - np.roll(rim, TANGENT_STEP, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
-    k = (owner[:, None] + np.arange(-spread, spread + 1)) % len(rim)  # (M, 2 spread + 1) the sections each may lie in
-    along = np.einsum("mc,mjc->mj", vertices[thin], tangent[k]) - np.einsum("ij,ij->i", rim, tangent)[k]
+    ring = np.arange(-spread, len(rim) + spread) % len(rim)  # the sections, wrapped past the rim's ends
+    plane = np.column_stack([tangent, -np.einsum("ij,ij->i", rim, tangent)])[ring].T.copy()  # (4, K + 2 spread)
+    window = owner[:, None] + np.arange(2 * spread + 1)  # (M, 2 spread + 1) the sections each may lie in, in `ring`
+    along = sum(points[:, i:i + 1] * plane[i][window] for i in range(3)) + plane[3][window]
     pair, step = np.nonzero(np.abs(along) <= SLAB_MM)
-    near, k = thin[pair], k[pair, step]
+    near, k = thin[pair], ring[window[pair, step]]
     offset = vertices[near] - rim[k]
     width = np.zeros(len(rim))
     np.maximum.at(width, k, np.linalg.norm(offset, axis=1))

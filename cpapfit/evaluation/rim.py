@@ -169,7 +169,7 @@ def rim_in(
     level = _level(heights.height)
     best = np.full(sectors, np.inf)
     np.minimum.at(best, sector, level)
-    bound = along - ceilings(vertices, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
+    bound = along - ceilings(uv + zone.centre @ plane.T, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
     rest = near & (along - low > SURE_MM) & (np.round(bound / TIE_MM) <= best[sector])
     on_face, face_cos, height = heights.joined(_touch_heights(vertices, rest, scan, face_mesh, axis, heights.out))
     first = _first_in_sector(np.flatnonzero(near), sector, _level(height), np.linalg.norm(uv, axis=1), sectors)
