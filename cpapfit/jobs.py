@@ -26,7 +26,7 @@ from . import __version__
 from .cushion.population import population
 from .errors import CpapfitError, InputError
 from .io import is_fused, load_scan
-from .outputs import design_files, report_files
+from .outputs import in_order, record_files, report_files, solid_files
 from .io.landmarks import user_landmarks
 from .io.mesh import companion_files
 from .io.sweep import fused_ply
@@ -105,11 +105,14 @@ def design_job(
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
         d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock)
-        files = design_files(d, scan)
+        solids = submit(solid_files, d.solid, d.mould_parts, d.frame.mesh)  # checked while the report is drawn
+        records = record_files(d, scan)
+        on_stage("report")
+        pictures = report_files(d, scan, records, submit)
+        files = in_order(records, solids.result())
         if is_fused(Path(scan_path)):
             files["fused_scan.ply"] = fused_ply(scan)
-        on_stage("report")
-        files |= report_files(d, scan, files, submit)
+        files |= pictures
     return DesignRun(json.loads(files["fit.json"]), scan.units_note, tuple(files), d), files
 
 

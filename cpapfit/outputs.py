@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import trimesh
 
 from .align.nonrigid import Registration
 from .fabrication.files import checked_assembly, checked_files
@@ -29,21 +30,37 @@ def registration_ply(reg: Registration) -> bytes:
 
 
 def design_files(d: Design, scan: Scan) -> dict[str, bytes]:
-    """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}; every solid's STL and 3MF
-    checked as a slicer reads it back (`fabrication.files.check_file`: else SolidError, nothing written)."""
-    passed = []  # the meshes checked as read back: a file reading back to one of them passes with it
-    meshes = checked_files(d.solid, "cushion", ("stl", "3mf"), passed)
-    for name, part in d.mould_parts.items():
-        meshes |= checked_files(part, name, passed=passed)
-    meshes |= checked_files(d.frame.mesh, "frame", passed=passed)
-    meshes |= checked_assembly({"cushion": d.solid, "frame": d.frame.mesh}, "assembly", passed)
+    """The files of `cpapfit design` (all mm, scan frame), as {name: bytes}: `record_files` and
+    `solid_files`, `in_order`."""
+    return in_order(record_files(d, scan), solid_files(d.solid, d.mould_parts, d.frame.mesh))
+
+
+def record_files(d: Design, scan: Scan) -> dict[str, bytes]:
+    """The records of a design as {name: bytes}: its registered template, contact curve, mask.json and fit.json."""
     return {
         "registered_template.ply": registration_ply(d.registration),
         "contact_curve.json": record_bytes(contact_curve_record(d)),
-        **meshes,
         "mask.json": record_bytes(mask_record(d)),
         "fit.json": record_bytes(design_record(d, scan)),
     }
+
+
+def in_order(records: dict[str, bytes], solids: dict[str, bytes]) -> dict[str, bytes]:
+    """A design's `record_files` and `solid_files` as one {name: bytes}, in the order they are listed."""
+    first = ("registered_template.ply", "contact_curve.json")
+    return {name: records[name] for name in first} | solids | {name: data for name, data in records.items() if name not in first}
+
+
+def solid_files(cushion: trimesh.Trimesh, mould_parts: dict[str, trimesh.Trimesh], frame: trimesh.Trimesh) -> dict[str, bytes]:
+    """The solids' files of a design (the cushion, its mould's parts, the frame, the two assembled;
+    mm, scan frame) as {name: bytes}, every STL and 3MF checked as a slicer reads it back
+    (`fabrication.files.check_file`: else SolidError, nothing written)."""
+    passed = []  # the meshes checked as read back: a file reading back to one of them passes with it
+    meshes = checked_files(cushion, "cushion", ("stl", "3mf"), passed)
+    for name, part in mould_parts.items():
+        meshes |= checked_files(part, name, passed=passed)
+    meshes |= checked_files(frame, "frame", passed=passed)
+    return meshes | checked_assembly({"cushion": cushion, "frame": frame}, "assembly", passed)
 
 
 def input_sha256(path: Path) -> str:

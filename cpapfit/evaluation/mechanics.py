@@ -20,6 +20,7 @@ open by (P - p_i) / k_i (normal, mm).
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize
@@ -68,10 +69,19 @@ def least_force_n(cos, area_mm2, uv, sealed_area_mm2: float, cpap_kpa: float, pu
     if not np.any(pull):
         return cpap_load_n(cpap_kpa, sealed_area_mm2)
     centre = _centre(cos, area_mm2, uv)
-    hull = ConvexHull(uv).equations  # (E, 3): unit normal out of the hull, offset
+    hull = _hull(np.ascontiguousarray(uv, dtype=float).tobytes())  # (E, 3): unit normal out of the hull, offset
     inside = -(uv @ hull[:, :2].T + hull[:, 2])  # (K, E) mm inside each edge
     held = (pull @ inside) / -(hull[:, :2] @ centre + hull[:, 2])
     return cpap_load_n(cpap_kpa, sealed_area_mm2) - float(held.min())
+
+
+@lru_cache(maxsize=4)
+def _hull(uv: bytes) -> np.ndarray:
+    """(E, 3) the edges of the convex hull of rim points (K, 2) mm given as bytes: unit normal out
+    of the hull, offset (kept: a force search presses one rim at many forces)."""
+    equations = ConvexHull(np.frombuffer(uv).reshape(-1, 2)).equations
+    equations.flags.writeable = False
+    return equations
 
 
 def _centre(cos, area_mm2, uv) -> np.ndarray:
