@@ -15,6 +15,7 @@ not measured from a real stock cushion. Sizes scale it about the nasal bridge
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
 one the nasal bridge to just below the lower lip (168-18). Over the population, S, M and L are
 the SIZE_PERCENTILES of that measure over its median; a nasal "W" (wide) is M made as wide as L.
+Each size's solid ships (`stock_solid`; `tools/build_stock_family.py` makes them again).
 Template frame (mm): x to the face's left, y up, z out of it.
 """
 

@@ -2,7 +2,9 @@
 
 The cushion (any triangle mesh in the scan frame: the designed solid, an STL from elsewhere, a
 stock cushion) is refined to 0.7 mm edges (REFINE_MM); every vertex of its wall near the face end (at most
-RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin.
+RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin: first
+those at most SURE_MM up, then the higher ones that could still touch first by the skin's ceiling
+over them (`ceiling.py`: the highest a triangle they could meet stands), which finds the same rim.
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
 pushed on. How far inside the skin it is: its distance to the nearest skin, over the |cos| of
