@@ -106,6 +106,8 @@ def design_job(
         scan = load_scan(Path(scan_path), units)
         d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock)
         solids = submit(solid_files, d.solid, d.mould_parts, d.frame.mesh)  # checked while the report is drawn
+        if solids.done():
+            solids.result()  # checked already (no worker): a solid that fails stops the design here
         records = record_files(d, scan)
         on_stage("report")
         pictures = report_files(d, scan, records, submit)

@@ -14,7 +14,8 @@ from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_cushion, fit_rim, pea
 from cpapfit.evaluation.leak import leak_l_min
 from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
 from cpapfit.evaluation.membrane import ROOT_MM
-from cpapfit.evaluation.rim import RimContact, find_rim, seal_lengths, _nearest_skin, _skin_below, _skin_planes
+from cpapfit.evaluation import rim
+from cpapfit.evaluation.rim import RimContact, RimZone, find_rim, rim_in, seal_lengths, _nearest_skin, _skin_below, _skin_planes
 from cpapfit.evaluation.tissue import stiffness
 from cpapfit.pipeline import face_for
 
@@ -700,14 +701,37 @@ def test_no_ray_along_the_axis_meets_a_surface_above_its_ceiling():
     beside the sheet, which no ray from them can meet, have none."""
     rng = np.random.default_rng(5)
     xy = np.vstack([rng.uniform(-20.0, 20.0, (300, 2)), [[-20, -20], [-20, 20], [20, -20], [20, 20]]])
-    sheet = trimesh.Trimesh(np.column_stack([xy, 3.0 * np.sin(xy[:, 0] / 4.0) * np.cos(xy[:, 1] / 5.0)]),
+    turn = trimesh.transformations.random_rotation_matrix(rng.random(3))[:3, :3]  # the axis and the plane tilted
+    sheet = trimesh.Trimesh(np.column_stack([xy, 3.0 * np.sin(xy[:, 0] / 4.0) * np.cos(xy[:, 1] / 5.0)]) @ turn.T,
                             Delaunay(xy).simplices, process=False)
-    axis, plane = np.array([0.0, 0.0, 1.0]), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    points = np.column_stack([rng.uniform(-25.0, 25.0, (4000, 2)), rng.uniform(-6.0, 6.0, 4000)])
+    axis, plane = turn[:, 2], turn[:, :2].T
+    local = np.column_stack([rng.uniform(-25.0, 25.0, (4000, 2)), rng.uniform(-6.0, 6.0, 4000)])
+    points = local @ turn.T
     ceiling = ceilings(points @ plane.T, [sheet], axis, plane)
     for direction in (axis, -axis):
         where, ray, _ = sheet.ray.intersects_location(points, np.broadcast_to(direction, points.shape), multiple_hits=False)
         assert len(ray) > 1000
-        assert np.all(where[:, 2] <= ceiling[ray])
-    beside = np.any(np.abs(points[:, :2]) > 21.0, axis=1)
+        assert np.all(where @ axis <= ceiling[ray])
+    beside = np.any(np.abs(local[:, :2]) > 21.0, axis=1)
     assert beside.sum() > 500 and np.all(ceiling[beside] == -np.inf)
+
+
+def test_a_wall_whose_lowest_ring_faces_a_closed_slab_from_below_reads_the_slab_from_the_whole_band(monkeypatch):
+    """Which side of a scan is out is voted on by hits from the whole wall band, not only its lowest
+    millimetre: rings of wall 28-30 mm round the axis, the lowest (z -3.1) under a closed 3 mm slab
+    (the scan, its top at z 0) and seeing only its underside, one inside it (z -0.5), more above:
+    the rim is the ring inside the slab, 0.5 mm deep, as casting from every vertex finds it."""
+    turn = np.linspace(0.0, 2 * np.pi, 1024, endpoint=False)
+    ring = lambda radius, z: np.column_stack([radius * np.cos(turn), radius * np.sin(turn), np.full(len(turn), z)])
+    wall = np.vstack([ring(30.0, -3.1), ring(28.0, -0.5), *(ring(30.0, z) for z in np.arange(0.5, 10.0, 0.5))])
+    zone = RimZone(wall, np.zeros((0, 3)), np.zeros(0), np.zeros(3))
+    slab = trimesh.creation.box(extents=[140.0, 140.0, 3.0])
+    slab.apply_translation([0.0, 0.0, -1.5])
+    elsewhere = trimesh.creation.box(extents=[10.0, 10.0, 1.0])
+    elsewhere.apply_translation([500.0, 0.0, 0.0])
+    axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    spared = rim_in(zone, slab, elsewhere, axis, up)
+    assert np.allclose(spared.points[:, 2], -0.5) and np.allclose(spared.clearance, -0.5, atol=1e-6)
+    monkeypatch.setattr(rim, "SURE_MM", rim.RIM_BAND_MM)
+    every = rim_in(zone, slab, elsewhere, axis, up)
+    assert np.array_equal(spared.points, every.points) and np.array_equal(spared.clearance, every.clearance)

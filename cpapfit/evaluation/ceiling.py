@@ -6,18 +6,17 @@ CELL_MM squares across the axis, each square holds the highest corner of any tri
 projected bounding box reaches it; a point's ceiling is its square's. So a point's height over any
 surface it meets along the axis is at least its own height less its ceiling (`rim.rim_in` casts
 rays only from wall vertices that this bound cannot rule out). A mesh's grid is kept for the next
-call about the same axis (KEPT of them): a stock cushion is seated at many places on one face.
+call about the same axis (the last four): a stock cushion is seated at many places on one face.
 """
-
-from collections import OrderedDict
 
 import numpy as np
 import trimesh
 
+from ..kept import Kept
+
 CELL_MM = 1.0  # the grid's squares across the axis
 PAD_MM = 1e-3  # boxes and heights are widened this much: the ray casts in single precision
-KEPT = 4
-_grids: OrderedDict = OrderedDict()
+_GRIDS = Kept(4)
 
 
 def ceilings(flat: np.ndarray, meshes: list[trimesh.Trimesh], axis: np.ndarray, plane: np.ndarray) -> np.ndarray:
@@ -36,13 +35,7 @@ def ceilings(flat: np.ndarray, meshes: list[trimesh.Trimesh], axis: np.ndarray, 
 def _grid(mesh: trimesh.Trimesh, axis: np.ndarray, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(each square's ceiling over `mesh` (mm, -inf where no triangle reaches it), the grid's corner
     (2,) mm across the axis), made or kept (the mesh's hash changes with its vertices and faces)."""
-    key = (hash(mesh), axis.tobytes(), plane.tobytes())
-    if key not in _grids:
-        _grids[key] = _made(mesh, axis, plane)
-        while len(_grids) > KEPT:
-            _grids.popitem(last=False)
-    _grids.move_to_end(key)
-    return _grids[key]
+    return _GRIDS.get((hash(mesh), axis.tobytes(), plane.tobytes()), lambda: _made(mesh, axis, plane))
 
 
 def _made(mesh: trimesh.Trimesh, axis: np.ndarray, plane: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -126,7 +126,8 @@ def _press_rim(rim: RimContact, k: np.ndarray, width_mm: float, force_n: float, 
 
 
 def _pressing(rim: RimContact, k: np.ndarray, width_mm: float, cpap_kpa: float, flaps: Flaps) -> Callable[[float], Pressed]:
-    """force N -> `_press_rim` of the rim at that force, each search started from the last one's equilibrium."""
+    """force N -> `_press_rim` of the rim at that force, each search started from the last one's
+    equilibrium (the same within the search's tolerance)."""
     last = None
 
     def at(force: float) -> Pressed:

@@ -20,17 +20,18 @@ open by (P - p_i) / k_i (normal, mm).
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize
 from scipy.spatial import ConvexHull
 
 from ..frozen import freeze_arrays
+from ..kept import Kept
 from .membrane import ROOT_MM
 
 COS_MIN = 0.2  # skin steeper than ~78 degrees to the axis is treated as 78 degrees
 N_PER_KPA_MM2 = 1e-3
+_HULLS = Kept(4)
 
 
 @dataclass(frozen=True)
@@ -69,17 +70,16 @@ def least_force_n(cos, area_mm2, uv, sealed_area_mm2: float, cpap_kpa: float, pu
     if not np.any(pull):
         return cpap_load_n(cpap_kpa, sealed_area_mm2)
     centre = _centre(cos, area_mm2, uv)
-    hull = _hull(np.ascontiguousarray(uv, dtype=float).tobytes())  # (E, 3): unit normal out of the hull, offset
+    hull = _HULLS.get(np.ascontiguousarray(uv, dtype=float).tobytes(), lambda: _hull(uv))  # (E, 3): unit normal out of the hull, offset
     inside = -(uv @ hull[:, :2].T + hull[:, 2])  # (K, E) mm inside each edge
     held = (pull @ inside) / -(hull[:, :2] @ centre + hull[:, 2])
     return cpap_load_n(cpap_kpa, sealed_area_mm2) - float(held.min())
 
 
-@lru_cache(maxsize=4)
-def _hull(uv: bytes) -> np.ndarray:
-    """(E, 3) the edges of the convex hull of rim points (K, 2) mm given as bytes: unit normal out
-    of the hull, offset (kept: a force search presses one rim at many forces)."""
-    equations = ConvexHull(np.frombuffer(uv).reshape(-1, 2)).equations
+def _hull(uv: np.ndarray) -> np.ndarray:
+    """(E, 3) the edges of the convex hull of (K, 2) mm rim points: unit normal out of the hull, offset
+    (read-only: kept in _HULLS, as a force search presses one rim at many forces)."""
+    equations = ConvexHull(uv).equations
     equations.flags.writeable = False
     return equations
 
@@ -109,7 +109,8 @@ def press(clearance, cos, area_mm2, k, uv, sealed_area_mm2: float, force_n: floa
     membrane (None: none). A flap pulls only while it closes its point's opening: an equilibrium
     that opens a point past its flap's reach is found again without that pull (the flap no longer
     seals there, so the air is on both sides of it), until none does. `near`: the same rim's
-    equilibrium at another force, where the search starts (the same minimum, in fewer steps)."""
+    equilibrium at another force, where the search starts (the same minimum within the search's
+    tolerance, in fewer steps)."""
     pull = np.zeros(len(clearance)) if flaps is None else flaps.pull_n
     while True:
         pressed = near = _equilibrium(clearance, cos, area_mm2, k, uv, sealed_area_mm2, force_n, cpap_kpa, pull, near)

@@ -16,7 +16,6 @@ measured, per sector, for the seal it adds.
 """
 
 from dataclasses import dataclass
-from functools import lru_cache
 from itertools import chain
 
 import numpy as np
@@ -25,7 +24,8 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from ..errors import InputError
-from ..frozen import freeze_arrays
+from ..frozen import freeze_arrays, read_only
+from ..kept import Kept
 from ..scan import Scan
 from ..tangents import across
 from .ceiling import ceilings
@@ -45,10 +45,12 @@ PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the p
 PROBE_RAYS = 6
 RIM_BAND_MM = 15.0  # a rim point is a wall vertex at most this far up the axis from its sector's lowest
 SURE_MM = 1.0  # rays first from the wall this far up from its sector's lowest; higher, only where they could touch first
+VOTE_EVERY = 8  # and from every this many-th of the higher ones: their hits vote on which side of the skin is out
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
 CANDIDATES = 8  # the nearest skin on a mesh: on the triangles around this many nearest vertices
+_REFINED = Kept(2)
 STRAY_MM = 1.0  # the nearest skin this far under the plane of the scan around it is a flap curled under, not skin
 
 
@@ -167,13 +169,8 @@ def rim_in(
     along = vertices @ axis
     low = _lowest(along, sector, np.ones(len(vertices), dtype=bool), sectors)[sector]
     near = along - low <= RIM_BAND_MM
-    heights = _touch_heights(vertices, near & (along - low <= SURE_MM), scan, face_mesh, axis)
-    level = _level(heights.height)
-    best = np.full(sectors, np.inf)
-    np.minimum.at(best, sector, level)
-    bound = along - ceilings(uv + zone.centre @ plane.T, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
-    rest = near & (along - low > SURE_MM) & (np.round(bound / TIE_MM) <= best[sector])
-    on_face, face_cos, height = heights.joined(_touch_heights(vertices, rest, scan, face_mesh, axis, heights.out))
+    on_face, face_cos, height = _band_heights(vertices, near, along - low, sector, sectors, uv + zone.centre @ plane.T, scan,
+                                              face_mesh, axis, plane)
     first = _first_in_sector(np.flatnonzero(near), sector, _level(height), np.linalg.norm(uv, axis=1), sectors)
     if len(first) < sectors or not np.isfinite(height[first]).all():
         raise InputError("the cushion does not run all the way round the mask axis over the face or the scan")
@@ -201,6 +198,26 @@ def _first_in_sector(candidates: np.ndarray, sector: np.ndarray, level: np.ndarr
         np.minimum.at(least, sector[candidates], key[candidates])
         candidates = candidates[key[candidates] == least[sector[candidates]]]
     return candidates[np.unique(sector[candidates], return_index=True)[1]]
+
+
+def _band_heights(vertices: np.ndarray, near: np.ndarray, up_band: np.ndarray, sector: np.ndarray, sectors: int, flat: np.ndarray,
+                  scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray,
+                  plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(on_face, face_cos, height) (V,) of the cushion's (V, 3) wall `vertices` (`Heights`), which
+    order the `near` (V,) bool as casting from every one would (NaN where no ray was cast): first
+    from those at most SURE_MM up their sector's band (`up_band` (V,) mm, `sector` (V,) of
+    `sectors`) and every VOTE_EVERY-th of the others (so that which side of a surface is out is
+    voted on by hits from all over the band), then from the higher ones whose height over the
+    skin's ceiling (`ceilings`, at `flat` (V, 2) mm across the axis, `plane` (2, 3)) could tie or
+    beat their sector's first touch."""
+    higher = near & (up_band > SURE_MM)
+    first = (near & ~higher) | (higher & (np.cumsum(higher) % VOTE_EVERY == 1))
+    heights = _touch_heights(vertices, first, scan, face_mesh, axis)
+    best = np.full(sectors, np.inf)
+    np.minimum.at(best, sector, _level(heights.height))
+    bound = vertices @ axis - ceilings(flat, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
+    rest = higher & ~first & (np.round(bound / TIE_MM) <= best[sector])
+    return heights.joined(_touch_heights(vertices, rest, scan, face_mesh, axis, heights.out))
 
 
 @dataclass(frozen=True)
@@ -274,36 +291,20 @@ def refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
     most of their source face's corners. A face across a sheet's end (a flap's free edge, whose
     own ray runs along the flap) is as thin as its corners, which lie on the flap's two sides;
     inf on an open sheet). The last two cushions' are kept: a design evaluates its cushion awake
-    and then presses the same cushion asleep (not to be changed: they are shared)."""
-    return _refined(_Content(cushion))
+    and then presses the same cushion asleep (shared: not to be changed)."""
+    return _REFINED.get((np.asarray(cushion.vertices).tobytes(), np.asarray(cushion.faces).tobytes()), lambda: _refined(cushion))
 
 
-class _Content:
-    """A mesh that hashes and compares by its vertices and faces."""
-
-    def __init__(self, mesh: trimesh.Trimesh):
-        self.mesh = mesh
-        self.key = (np.asarray(mesh.vertices).tobytes(), np.asarray(mesh.faces).tobytes())
-
-    def __hash__(self) -> int:
-        return hash(self.key)
-
-    def __eq__(self, other) -> bool:
-        return isinstance(other, _Content) and self.key == other.key
-
-
-@lru_cache(maxsize=2)
-def _refined(content: _Content) -> tuple[trimesh.Trimesh, np.ndarray]:
-    """`refined` of `content`'s mesh."""
-    cushion = content.mesh
+def _refined(cushion: trimesh.Trimesh) -> tuple[trimesh.Trimesh, np.ndarray]:
+    """`refined`, made (a mesh of its own, its thickness read-only)."""
     face = face_thickness_mm(cushion) if cushion.is_watertight else np.full(len(cushion.faces), np.inf)
     corner = vertex_thickness_mm(cushion, face)
     points = cushion.vertices[cushion.faces]
     if np.linalg.norm(points - np.roll(points, 1, axis=1), axis=2).max() <= REFINE_MM:
-        return cushion, corner
+        return trimesh.Trimesh(np.array(cushion.vertices), np.array(cushion.faces), process=False), read_only(corner)
     vertices, faces, source = trimesh.remesh.subdivide_to_size(cushion.vertices, cushion.faces, REFINE_MM, return_index=True)
     fine = trimesh.Trimesh(vertices, faces, process=False)
-    return fine, vertex_thickness_mm(fine, corner[cushion.faces].max(axis=1)[source])
+    return fine, read_only(vertex_thickness_mm(fine, corner[cushion.faces].max(axis=1)[source]))
 
 
 def _why_uncovered(scan: trimesh.Trimesh | trimesh.PointCloud) -> str:
