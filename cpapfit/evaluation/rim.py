@@ -45,7 +45,7 @@ PROBE_MM = 1.0  # a mesh's skin under a rim point: the median height under the p
 PROBE_RAYS = 6
 RIM_BAND_MM = 15.0  # a rim point is a wall vertex at most this far up the axis from its sector's lowest
 SURE_MM = 1.0  # rays first from the wall this far up from its sector's lowest; higher, only where they could touch first
-VOTE_EVERY = 8  # and from every this many-th of the higher ones: their hits vote on which side of the skin is out
+VOTE_EVERY = 16  # and from every this many-th of the band: their hits alone vote on which side of the skin is out
 MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from the rim this many sectors either side
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
@@ -206,13 +206,14 @@ def _band_heights(vertices: np.ndarray, near: np.ndarray, up_band: np.ndarray, s
     """(on_face, face_cos, height) (V,) of the cushion's (V, 3) wall `vertices` (`Heights`), which
     order the `near` (V,) bool as casting from every one would (NaN where no ray was cast): first
     from those at most SURE_MM up their sector's band (`up_band` (V,) mm, `sector` (V,) of
-    `sectors`) and every VOTE_EVERY-th of the others (so that which side of a surface is out is
-    voted on by hits from all over the band), then from the higher ones whose height over the
-    skin's ceiling (`ceilings`, at `flat` (V, 2) mm across the axis, `plane` (2, 3)) could tie or
-    beat their sector's first touch."""
+    `sectors`) and every VOTE_EVERY-th of the band, whose hits alone vote on which side of a
+    surface is out (a sample of the band's, which all voted), then from the higher ones whose
+    height over the skin's ceiling (`ceilings`, at `flat` (V, 2) mm across the axis, `plane` (2, 3))
+    could tie or beat their sector's first touch."""
     higher = near & (up_band > SURE_MM)
-    first = (near & ~higher) | (higher & (np.cumsum(higher) % VOTE_EVERY == 1))
-    heights = _touch_heights(vertices, first, scan, face_mesh, axis)
+    voters = near & (np.cumsum(near) % VOTE_EVERY == 1)
+    first = (near & ~higher) | voters
+    heights = _touch_heights(vertices, first, scan, face_mesh, axis, voters=voters)
     best = np.full(sectors, np.inf)
     np.minimum.at(best, sector, _level(heights.height))
     bound = vertices @ axis - ceilings(flat, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
@@ -239,20 +240,21 @@ class Heights:
 
 
 def _touch_heights(vertices: np.ndarray, cast: np.ndarray, scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh,
-                   axis: np.ndarray, out: tuple = (None, None)) -> Heights:
+                   axis: np.ndarray, out: tuple = (None, None), voters: np.ndarray | None = None) -> Heights:
     """The `Heights` of the `cast` (V,) bool of the cushion's (V, 3) wall `vertices` along the unit
     `axis`: over a mesh scan, its height over the scanned skin (one ray: the rim point's clearance is
     then read as the median of a few, `skin_under`; skin past the registered face's edge, within
     REACH_MM, is skin), unless that ray meets no skin or goes through a hole (`_through_hole`); else,
     and over a point cloud, its height over the registered face `face_mesh`; `out`: the sides the
-    hits face where already found."""
+    hits face where already found, else as the hits of the `voters` (V,) bool (all cast, where given) face."""
     points, axes = vertices[cast], np.broadcast_to(axis, (int(cast.sum()), 3))
+    voting = None if voters is None else voters[cast]
     on_face, face_cos = np.full(len(vertices), np.nan), np.zeros(len(vertices))
-    on_face[cast], face_cos[cast], face_out = _height_over(points, face_mesh, axes, REACH_MM, out[0])
+    on_face[cast], face_cos[cast], face_out = _height_over(points, face_mesh, axes, REACH_MM, out[0], voting)
     if not isinstance(scan, trimesh.Trimesh):
         return Heights(cast, on_face, face_cos, on_face, (face_out, None))
     on_scan = np.full(len(vertices), np.nan)
-    on_scan[cast], _, scan_out = _height_over(points, scan, axes, REACH_MM, out[1])
+    on_scan[cast], _, scan_out = _height_over(points, scan, axes, REACH_MM, out[1], voting)
     height = np.where(np.isfinite(on_scan) & ~_through_hole(on_scan, on_face), on_scan, on_face)
     return Heights(cast, on_face, face_cos, height, (face_out, scan_out))
 
@@ -336,18 +338,20 @@ def spacing(tree: cKDTree, sample: int = 2000) -> float:
     return float(np.median(tree.query(points, k=2)[0][:, 1]))
 
 
-def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float, out: float | None = None):
+def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, reach: float, out: float | None = None,
+                 voters: np.ndarray | None = None):
     """(height (V,) mm each of (V, 3) points lies above the skin along its unit axis (V, 3), NaN where
     no skin within `reach`; that skin's normal . axis (V,); out). Inside the skin (the first surface up
     its axis faces out, up the axis) the height is minus the depth to it; else it is the height over
     the first surface below. A point in the air under an overhang (the wing of the nose over the
     groove beside it) is over the groove, not inside the wing. Out (1 or -1, along the normals or
-    against them) is the side most of these hits face unless given (a mesh wound inside out reads
-    the same)."""
+    against them) is the side most of these hits face (of the `voters` (V,) bool's rays, where
+    given) unless given (a mesh wound inside out reads the same)."""
     up, up_facing = _first_hit(points, mesh, axes, reach)
     down, down_facing = _first_hit(points, mesh, -axes, reach)
     if out is None:
-        facing = np.concatenate([up_facing[np.isfinite(up)], -down_facing[np.isfinite(down)]])
+        voting = np.ones(len(points), dtype=bool) if voters is None else voters
+        facing = np.concatenate([up_facing[np.isfinite(up) & voting], -down_facing[np.isfinite(down) & voting]])
         out = 1.0 if not len(facing) or np.median(facing) >= 0 else -1.0
     inside = np.isfinite(up) & (out * up_facing > 0)
     return np.where(inside, -up, down), np.where(inside, up_facing, -down_facing), out
