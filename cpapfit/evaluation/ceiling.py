@@ -5,7 +5,8 @@ holds the point, and meets each no higher up the axis than its highest corner. O
 CELL_MM squares across the axis, each square holds the highest corner of any triangle whose
 projected bounding box reaches it; a point's ceiling is its square's. So a point's height over any
 surface it meets along the axis is at least its own height less its ceiling (`rim.rim_in` casts
-rays only from wall vertices that this bound cannot rule out). A mesh's grid is kept for the next
+rays from the wall higher than its lowest millimetre only where this bound cannot rule out that
+they touch first). A mesh's grid is kept for the next
 call about the same axis (the last four): a stock cushion is seated at many places on one face.
 """
 

@@ -3,8 +3,9 @@
 The cushion (any triangle mesh in the scan frame: the designed solid, an STL from elsewhere, a
 stock cushion) is refined to 0.7 mm edges (REFINE_MM); every vertex of its wall near the face end (at most
 RIM_BAND_MM up the axis from the lowest in its direction) looks down the mask axis for the skin: first
-those at most SURE_MM up, then the higher ones that could still touch first by the skin's ceiling
-over them (`ceiling.py`: the highest a triangle they could meet stands), which finds the same rim.
+those at most SURE_MM up and every VOTE_EVERY-th of the band (whose hits vote on which side of the
+scan is out), then the higher ones that could still touch first by the skin's ceiling over them
+(`ceiling.py`: the highest a triangle they could meet stands), which finds the same rim.
 Around the axis, in SECTORS equal angles, the vertex with the least clearance is the rim's
 contact point in that direction: the first part of the cushion the skin meets when the mask is
 pushed on. How far inside the skin it is: its distance to the nearest skin, over the |cos| of
@@ -211,7 +212,7 @@ def _band_heights(vertices: np.ndarray, near: np.ndarray, up_band: np.ndarray, s
     height over the skin's ceiling (`ceilings`, at `flat` (V, 2) mm across the axis, `plane` (2, 3))
     could tie or beat their sector's first touch."""
     higher = near & (up_band > SURE_MM)
-    voters = near & (np.cumsum(near) % VOTE_EVERY == 1)
+    voters = near & ((np.cumsum(near) - 1) % VOTE_EVERY == 0)
     first = (near & ~higher) | voters
     heights = _touch_heights(vertices, first, scan, face_mesh, axis, voters=voters)
     best = np.full(sectors, np.inf)
@@ -346,12 +347,14 @@ def _height_over(points: np.ndarray, mesh: trimesh.Trimesh, axes: np.ndarray, re
     the first surface below. A point in the air under an overhang (the wing of the nose over the
     groove beside it) is over the groove, not inside the wing. Out (1 or -1, along the normals or
     against them) is the side most of these hits face (of the `voters` (V,) bool's rays, where
-    given) unless given (a mesh wound inside out reads the same)."""
+    given and any hit) unless given (a mesh wound inside out reads the same)."""
     up, up_facing = _first_hit(points, mesh, axes, reach)
     down, down_facing = _first_hit(points, mesh, -axes, reach)
     if out is None:
-        voting = np.ones(len(points), dtype=bool) if voters is None else voters
-        facing = np.concatenate([up_facing[np.isfinite(up) & voting], -down_facing[np.isfinite(down) & voting]])
+        hit = np.isfinite(up), np.isfinite(down)
+        if voters is not None and ((hit[0] | hit[1]) & voters).any():
+            hit = hit[0] & voters, hit[1] & voters
+        facing = np.concatenate([up_facing[hit[0]], -down_facing[hit[1]]])
         out = 1.0 if not len(facing) or np.median(facing) >= 0 else -1.0
     inside = np.isfinite(up) & (out * up_facing > 0)
     return np.where(inside, -up, down), np.where(inside, up_facing, -down_facing), out
