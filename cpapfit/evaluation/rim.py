@@ -51,8 +51,8 @@ MEMBRANE_SPREAD = 12  # a rim point's section takes in the membrane hanging from
 NORMAL_MM = 2.5  # the skin's normal under a rim point: the scan's, over this radius (half the 5 mm flange)
 NORMAL_POINTS = 5  # a point cloud's normal needs this many points within NORMAL_MM
 CANDIDATES = 8  # the nearest skin on a mesh: on the triangles around this many nearest vertices
-_REFINED = Kept(2)
 STRAY_MM = 1.0  # the nearest skin this far under the plane of the scan around it is a flap curled under, not skin
+_REFINED = Kept(2)  # the last cushions `refined`
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ def rim_in(
     along = vertices @ axis
     low = _lowest(along, sector, np.ones(len(vertices), dtype=bool), sectors)[sector]
     near = along - low <= RIM_BAND_MM
-    on_face, face_cos, height = _band_heights(vertices, near, along - low, sector, sectors, uv + zone.centre @ plane.T, scan,
+    on_face, face_cos, height = _band_heights(vertices, near, along, low, sector, sectors, uv + zone.centre @ plane.T, scan,
                                               face_mesh, axis, plane)
     first = _first_in_sector(np.flatnonzero(near), sector, _level(height), np.linalg.norm(uv, axis=1), sectors)
     if len(first) < sectors or not np.isfinite(height[first]).all():
@@ -201,23 +201,23 @@ def _first_in_sector(candidates: np.ndarray, sector: np.ndarray, level: np.ndarr
     return candidates[np.unique(sector[candidates], return_index=True)[1]]
 
 
-def _band_heights(vertices: np.ndarray, near: np.ndarray, up_band: np.ndarray, sector: np.ndarray, sectors: int, flat: np.ndarray,
+def _band_heights(vertices: np.ndarray, near: np.ndarray, along: np.ndarray, low: np.ndarray, sector: np.ndarray, sectors: int, flat: np.ndarray,
                   scan: trimesh.Trimesh | trimesh.PointCloud, face_mesh: trimesh.Trimesh, axis: np.ndarray,
                   plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(on_face, face_cos, height) (V,) of the cushion's (V, 3) wall `vertices` (`Heights`), which
     order the `near` (V,) bool as casting from every one would (NaN where no ray was cast): first
-    from those at most SURE_MM up their sector's band (`up_band` (V,) mm, `sector` (V,) of
-    `sectors`) and every VOTE_EVERY-th of the band, whose hits alone vote on which side of a
-    surface is out (a sample of the band's, which all voted), then from the higher ones whose
+    from those at most SURE_MM up the axis (`along` (V,) mm) from their sector's lowest (`low`
+    (V,) mm, `sector` (V,) of `sectors`) and every VOTE_EVERY-th of the band, whose hits alone vote
+    on which side of a surface is out (a sample of the band's, which all voted), then from the higher ones whose
     height over the skin's ceiling (`ceilings`, at `flat` (V, 2) mm across the axis, `plane` (2, 3))
     could tie or beat their sector's first touch."""
-    higher = near & (up_band > SURE_MM)
+    higher = near & (along - low > SURE_MM)
     voters = near & ((np.cumsum(near) - 1) % VOTE_EVERY == 0)
     first = (near & ~higher) | voters
     heights = _touch_heights(vertices, first, scan, face_mesh, axis, voters=voters)
     best = np.full(sectors, np.inf)
     np.minimum.at(best, sector, _level(heights.height))
-    bound = vertices @ axis - ceilings(flat, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
+    bound = along - ceilings(flat, [face_mesh] + ([scan] if isinstance(scan, trimesh.Trimesh) else []), axis, plane)
     rest = higher & ~first & (np.round(bound / TIE_MM) <= best[sector])
     return heights.joined(_touch_heights(vertices, rest, scan, face_mesh, axis, heights.out))
 
