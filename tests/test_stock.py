@@ -9,8 +9,7 @@ from cpapfit.cushion.generic import AXIS, NOSE_TIP, UP, contact_on
 from cpapfit.cushion.nurbs import CushionParams, design_cushion
 from cpapfit.cushion.contact import SAMPLES
 from cpapfit.cushion.population import POPULATION, drawn, population, population_gauge
-from cpapfit.cushion.stock import BRIDGE, SIZES, mean_face, set_back, size_scale, stock_cushion, stock_solid
-from cpapfit.cushion.envelope import REACH_MM
+from cpapfit.cushion.stock import BRIDGE, SIZES, SLACK_MM, mean_face, set_back, size_scale, stock_cushion, stock_solid
 from cpapfit.evaluation.fit import KPA_PER_CMH2O, Face
 from cpapfit.evaluation import rim
 from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm, reach_mm
@@ -92,7 +91,7 @@ def test_the_gauge_picks_the_size_made_for_a_face_that_size(size):
 def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
     """The M oronasal cushion on the face it was made on: seated within a millimetre of the nasal
     bridge, sealed (no leak) at under COMFORT_N with its peak under the capillary pressure; its
-    membrane, sized to reach REACH_MM[0] at the lowest CPAP pressure, reaches 1.5 mm or more there
+    membrane, sized to reach SLACK_MM at the lowest CPAP pressure, reaches 1.5 mm or more there
     as measured on half its rim (the section from the rim point, not the flap's root)."""
     fit = seated("oronasal", "M", face_scaled(np.ones(3)))
     summary = fit.fit.summary()
@@ -101,7 +100,7 @@ def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
     assert summary["leak_l_min"] == 0.0 and summary["pressure_max_kpa"] < 4.3
     assert summary["rim_covered_fraction"] == 1.0
     rim = fit.fit.rim
-    assert np.median(reach_mm(rim.membrane_mm, rim.membrane_thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)) >= REACH_MM[0] - 0.5
+    assert np.median(reach_mm(rim.membrane_mm, rim.membrane_thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)) >= SLACK_MM - 0.5
 
 
 def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():

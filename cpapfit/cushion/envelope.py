@@ -7,9 +7,9 @@ the states it stays on in (a state that lifts the mask off the face is a matter 
 not of the seal) that are pressed at one CPAP pressure (the awake face and the states without a
 pressure of their own at the awake one, the range's ends at theirs), over the WINDOW sectors beside
 it, grown by MARGIN_MM and MARGIN_SHARE for the prediction's doubt, is the reach its membrane needs
-at that pressure, at most REACH_MM[1]; and REACH_MM[0] at the lowest pressure everywhere (the
-awake seal's slack). The membrane's width is the narrowest flap of the cushion's membrane
-thickness that reaches each of those at its pressure (`evaluation.membrane.width_for`), and at
+at that pressure, at most WIDEST_MM; and MARGIN_MM at the lowest pressure everywhere (the awake
+seal's doubt; no wider, so that a cushion set far off its place still leaks). The membrane's
+width is the narrowest flap of the cushion's membrane thickness that reaches each of those at its pressure (`evaluation.membrane.width_for`), and at
 most INWARD_SHARE of the width at which it and its neighbours would meet (where the seal curve
 bends tightly inwards, beside a nostril, the flaps fan out across the bend, `flap_directions`, but
 still run together). Wherever the membrane's sheet still turns back on itself or closes up across
@@ -39,7 +39,7 @@ from ..evaluation.rim import SECTORS
 from ..evaluation.states import CPAP_RANGE_CMH2O, FaceState, StateFit, fit_states, sleep_states
 
 MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
-REACH_MM = (2.0, 8.0)  # every rim point gets some membrane (the awake seal's slack); the widest is a stock full-face flap's
+WIDEST_MM = 8.0  # the most any rim point's membrane need reach: a stock full-face flap's
 WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
 INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
 SHRINK, SHRINKS = 0.75, 6
@@ -54,16 +54,16 @@ LOWEST_CPAP_KPA = CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O
 def needed_reach(states: tuple[StateFit, ...], awake: CushionFit, awake_kpa: float) -> dict[float, np.ndarray]:
     """{CPAP kPa: (SECTORS,) mm}: the reach the membrane needs at each rim sector at each pressure
     the face is pressed at (`awake` and the states without a CPAP pressure of their own at
-    `awake_kpa`), and the awake seal's slack at the lowest (module docstring)."""
+    `awake_kpa`), and at least MARGIN_MM at the lowest (module docstring)."""
     widest = {awake_kpa: np.nan_to_num(awake.opening_mm)}
     for fits in states:
         fit = fits.fits.get("custom")
         if fit is not None and not fit.pressed.lifted:
             kpa = awake_kpa if fits.state.cpap_cmh2o is None else fits.state.cpap_cmh2o * KPA_PER_CMH2O
             widest[kpa] = np.maximum(widest.get(kpa, 0.0), np.nan_to_num(fit.opening_mm))
-    need = {kpa: np.minimum(maximum_filter1d(w, size=2 * WINDOW + 1, mode="wrap") * (1.0 + MARGIN_SHARE) + MARGIN_MM, REACH_MM[1])
+    need = {kpa: np.minimum(maximum_filter1d(w, size=2 * WINDOW + 1, mode="wrap") * (1.0 + MARGIN_SHARE) + MARGIN_MM, WIDEST_MM)
             for kpa, w in widest.items()}
-    need[LOWEST_CPAP_KPA] = np.maximum(need.get(LOWEST_CPAP_KPA, 0.0), REACH_MM[0])
+    need[LOWEST_CPAP_KPA] = np.maximum(need.get(LOWEST_CPAP_KPA, 0.0), MARGIN_MM)
     return need
 
 

@@ -7,9 +7,8 @@ SET_BACK_PERCENTILE-th of the population's faces (`cushion.population`) stands o
 the mean face (each face's depth taken from its own mean depth round the seal, where a mask
 settles; less the least set back round the rim), so that the wall clears most faces' high points (the nasal bridge most) and the
 membrane closes the rest; and a self-sealing membrane,
-as stock silicone cushions have, sized by the custom cushion's rule for its awake slack: every
-flap reaches REACH_MM[0] at the lowest CPAP pressure (`envelope.flap_widths`, narrowed where its
-sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The flap is
+as stock silicone cushions have: every flap reaches SLACK_MM at the lowest CPAP pressure
+(`envelope.flap_widths`, narrowed where its sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The flap is
 not measured from a real stock cushion. Sizes scale it about the nasal bridge
 (template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
@@ -29,7 +28,7 @@ from ..frozen import read_only
 from ..ict import ict_face, load_ict, template_truth
 from ..shipped import npz
 from ..template import load_template
-from .envelope import LOWEST_CPAP_KPA, REACH_MM, flap_widths, with_flaps
+from .envelope import LOWEST_CPAP_KPA, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
 from .nurbs import AROUND, Cushion, CushionParams, design_cushion
 from .population import population, population_gauge, seal_depth
@@ -37,6 +36,7 @@ from .solid import cushion_solid
 
 SIZE_PERCENTILES = {"S": 15.0, "M": 50.0, "L": 85.0}
 SET_BACK_PERCENTILE = 85.0
+SLACK_MM = 2.0  # every flap's reach at the lowest CPAP pressure: 10.5 mm of 0.5 mm silicone, reaching 5 mm at 10 cmH2O
 BRIDGE = 168
 SIZES = {"nasal": ("S", "M", "L", "W"), "oronasal": ("S", "M", "L")}
 
@@ -101,6 +101,6 @@ def stock_cushion(mask: str, size: str, params: CushionParams = CushionParams())
     contact = contact_on(mask, skin)
     back = -set_back(mask) * scale[2]  # a pre-load out of the skin
     wall = cushion_solid(design_cushion(contact, AXIS, UP, scaled[NOSE_TIP], params, back), contact.normals)[0]
-    widths = flap_widths({LOWEST_CPAP_KPA: np.full(AROUND, REACH_MM[0])}, contact, params.membrane_mm)
+    widths = flap_widths({LOWEST_CPAP_KPA: np.full(AROUND, SLACK_MM)}, contact, params.membrane_mm)
     cushion, solid, _ = with_flaps(contact, AXIS, UP, scaled[NOSE_TIP], params, back, widths, skin, wall)
     return cushion, solid
