@@ -135,11 +135,12 @@ def test_a_membrane_needs_to_reach_each_opening_at_the_pressure_it_opens_at():
     """Openings of 2 mm in a pillow state (pressed at the awake 10 cmH2O) and 1 mm at CPAP 4
     cmH2O, 6 mm in a state that lifts the mask off: the membrane must reach 2 x 1.25 + 1 = 3.5 mm at
     10 cmH2O over the sectors beside the pillow's opening, 1 x 1.25 + 1 = 2.25 mm at 4 cmH2O beside
-    the other and 1 mm (the awake seal's doubt) elsewhere, and nothing for the lifted state; the flap that
+    the other and 1 mm (the margin) elsewhere, and nothing for the lifted state (with the 4 cmH2O
+    state lifted off too, the 1 mm margin alone there); the flap that
     reaches 3.5 mm at 10 cmH2O is narrower than one reaching it at 4."""
     from types import SimpleNamespace
 
-    from cpapfit.cushion.envelope import LOWEST_CPAP_KPA, WINDOW, needed_reach
+    from cpapfit.cushion.envelope import LOWEST_CPAP_KPA, MARGIN_MM, WINDOW, needed_reach
     from cpapfit.evaluation.fit import KPA_PER_CMH2O
     from cpapfit.evaluation.rim import SECTORS
 
@@ -159,6 +160,8 @@ def test_a_membrane_needs_to_reach_each_opening_at_the_pressure_it_opens_at():
     beside[90 - WINDOW: 91 + WINDOW] = True
     assert need[LOWEST_CPAP_KPA][beside] == pytest.approx(np.full(beside.sum(), 2.25))
     assert need[LOWEST_CPAP_KPA][~beside] == pytest.approx(np.full(SECTORS - beside.sum(), 1.0))
+    lifted = needed_reach((state(None, 40, 2.0), state(4.0, 90, 1.0, lifted=True)), awake, awake_kpa)
+    assert lifted[LOWEST_CPAP_KPA] == pytest.approx(np.full(SECTORS, MARGIN_MM))
     assert width_for(np.array([3.5]), 0.5, awake_kpa)[0] < width_for(np.array([3.5]), 0.5, LOWEST_CPAP_KPA)[0] - 2.0
 
 
