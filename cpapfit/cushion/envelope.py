@@ -18,10 +18,9 @@ the seal (`twisted_columns`), those columns narrow by SHRINK, and the whole memb
 solid would cross itself; beside a stretch of a face's own flaps (not the stock family's) so
 narrowed, its neighbours step down to it by at most TAPER_MM a column (`tapered`: a sudden step
 in width folds the sheet beside it, which would narrow it further there). Where a flap so
-narrowed, or as built (`built_widths`: laid along skin that curves under it, its free edge
-nearer the seal than the width asked), falls short of its need, its sheet is thinner, down to
-THINNEST_MM (`flap_thickness`): the reach grows as the cube of the thickness falls, so a flap
-that cannot widen still closes the opening.
+narrowed falls short of its need, its sheet is thinner, down to THINNEST_MM (`flap_thickness`):
+the reach grows as the cube of the thickness falls, so a flap that cannot widen still closes
+the opening.
 """
 
 from dataclasses import replace
