@@ -159,9 +159,7 @@ def with_flaps(
     `params.membrane_mm` throughout."""
     def sized_for(widths: np.ndarray) -> Cushion:
         flaps = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
-        if need is None:
-            return flaps
-        return replace(flaps, membrane_thickness=flap_thickness(need, np.minimum(widths, built_widths(flaps)), params.membrane_mm))
+        return flaps if need is None else replace(flaps, membrane_thickness=flap_thickness(need, widths, params.membrane_mm))
 
     for _ in range(SHRINKS + 1):
         sized = sized_for(widths)
@@ -178,14 +176,6 @@ def with_flaps(
         widths = SHRINK * widths
         sized = sized_for(widths)
     return sized, solid, thinnest
-
-
-def built_widths(cushion: Cushion) -> np.ndarray:
-    """(AROUND,) mm: how far each control column's flap, as built, reaches from the seal curve to its
-    free edge in a straight line (as the evaluation reads a flap across its section,
-    `membrane.rim_membrane`): laid along skin that curves under it, shorter than the width asked."""
-    reach = np.linalg.norm(cushion.membrane_grid(AROUND, 2)[:, -1] - cushion.grid(AROUND, 2)[:, 0], axis=1)
-    return np.roll(reach, 1)  # grid point k lies on column k + 1 (`Cushion.membrane_thickness_at`)
 
 
 def tapered(widths: np.ndarray) -> np.ndarray:
