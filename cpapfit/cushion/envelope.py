@@ -7,20 +7,20 @@ the states it stays on in (a state that lifts the mask off the face is a matter 
 not of the seal) that are pressed at one CPAP pressure (the awake face and the states without a
 pressure of their own at the awake one, the range's ends at theirs), over the WINDOW sectors beside
 it, grown by MARGIN_MM and MARGIN_SHARE for the prediction's doubt, is the reach its membrane needs
-at that pressure, at most WIDEST_MM; and at least MARGIN_MM at the lowest pressure everywhere
-(the prediction's margin, and no more: flaps that reach 2 mm there everywhere, as a stock
-cushion's, seal some cushions set 10 mm off their place). The membrane's width is the narrowest
-flap of the cushion's membrane thickness that reaches each of those at its pressure
+at that pressure, at most WIDEST_MM; and at least MARGIN_MM at the lowest pressure everywhere (the
+prediction's margin, and no more: flaps that reach 2 mm there everywhere, as a stock cushion's,
+seal some cushions set 10 mm off their place). The membrane's width is the narrowest flap of the
+cushion's membrane thickness that reaches each of those at its pressure
 (`evaluation.membrane.width_for`), and at most INWARD_SHARE of the width at which it and its
-neighbours would meet (where the seal curve bends tightly inwards, beside a nostril, the flaps
-fan out across the bend, `flap_directions`, but still run together). Wherever the membrane's sheet still turns back on itself or closes up across
-the seal (`twisted_columns`), those columns narrow by SHRINK, and the whole membrane while its
-solid would cross itself; beside a stretch of a face's own flaps (not the stock family's) so
-narrowed, its neighbours step down to it by at most TAPER_MM a column (`tapered`: a sudden step
-in width folds the sheet beside it, which would narrow it further there). Where a flap so
-narrowed falls short of its need, its sheet is thinner, down to THINNEST_MM (`flap_thickness`):
-the reach grows as the cube of the thickness falls, so a flap that cannot widen still closes
-the opening.
+neighbours would meet (where the seal curve bends tightly inwards, beside a nostril, the flaps fan
+out across the bend, `flap_directions`, but still run together). Wherever the membrane's sheet
+still turns back on itself or closes up across the seal (`twisted_columns`), those columns narrow
+by SHRINK, and the whole membrane while its solid would cross itself; beside a stretch of a face's
+own flaps (not the stock family's) so narrowed, its neighbours step down to it by at most TAPER_MM
+a column (`tapered`: a sudden step in width folds the sheet beside it, which would narrow it
+further there). Where a flap so narrowed falls short of its need, its sheet is thinner, down to
+THINNEST_MM (`flap_thickness`): the reach grows as the cube of the thickness falls, so a flap that
+cannot widen still closes the opening.
 """
 
 from dataclasses import replace

@@ -8,9 +8,9 @@ the mean face (each face's depth taken from its own mean depth round the seal, w
 settles; less the least set back round the rim), so that the wall clears most faces' high points (the nasal bridge most) and the
 membrane closes the rest; and a self-sealing membrane,
 as stock silicone cushions have: every flap reaches SLACK_MM at the lowest CPAP pressure
-(`envelope.flap_widths`, narrowed where its sheet would twist, `envelope.with_flaps`); no face's sleep states are added. The flap is
-not measured from a real stock cushion. Sizes scale it about the nasal bridge
-(template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
+(`envelope.flap_widths`, narrowed where its sheet would twist, `envelope.with_flaps`); no face's
+sleep states are added. The flap is not measured from a real stock cushion. Sizes scale it
+about the nasal bridge (template landmark 168, where a stock mask is seated) by the adult spread of the measure a sizing
 gauge reads: for a nasal mask the nose's width at the wings (landmarks 129-358), for an oronasal
 one the nasal bridge to just below the lower lip (168-18). Over the population, S, M and L are
 the SIZE_PERCENTILES of that measure over its median; a nasal "W" (wide) is M made as wide as L.
