@@ -133,11 +133,11 @@ def test_a_flap_too_narrow_for_its_need_is_thinner_just_enough_to_reach_it():
 
 def test_a_membrane_needs_to_reach_each_opening_at_the_pressure_it_opens_at():
     """Openings of 2 mm in a pillow state (pressed at the awake 10 cmH2O) and 1 mm at CPAP 4
-    cmH2O, 6 mm in a state that lifts the mask off: the membrane must reach 2 x 1.25 + 1 = 3.5 mm at
-    10 cmH2O over the sectors beside the pillow's opening, 1 x 1.25 + 1 = 2.25 mm at 4 cmH2O beside
-    the other and 1 mm (the margin) elsewhere, and nothing for the lifted state (with the 4 cmH2O
-    state lifted off too, the 1 mm margin alone there); the flap that
-    reaches 3.5 mm at 10 cmH2O is narrower than one reaching it at 4."""
+    cmH2O, 6 mm in a state that lifts the mask off: the membrane must reach 2 x 1.25 + 0.75 = 3.25
+    mm at 10 cmH2O over the sectors beside the pillow's opening, 1 x 1.25 + 0.75 = 2.0 mm at 4 cmH2O
+    beside the other and 0.75 mm (the margin) elsewhere, and nothing for the lifted state (with the
+    4 cmH2O state lifted off too, the 0.75 mm margin alone there); the flap that
+    reaches 3.25 mm at 10 cmH2O is narrower than one reaching it at 4."""
     from types import SimpleNamespace
 
     from cpapfit.cushion.envelope import LOWEST_CPAP_KPA, MARGIN_MM, WINDOW, needed_reach
@@ -154,15 +154,15 @@ def test_a_membrane_needs_to_reach_each_opening_at_the_pressure_it_opens_at():
     awake = state(None, 0, 0.0).fits["custom"]
     need = needed_reach((state(None, 40, 2.0), state(4.0, 90, 1.0), state(20.0, 60, 6.0, lifted=True)), awake, awake_kpa)
     assert sorted(need) == sorted([awake_kpa, LOWEST_CPAP_KPA])
-    assert need[awake_kpa][40 - WINDOW: 41 + WINDOW] == pytest.approx(np.full(2 * WINDOW + 1, 3.5))
-    assert need[awake_kpa][41 + WINDOW:].max() == pytest.approx(1.0)
+    assert need[awake_kpa][40 - WINDOW: 41 + WINDOW] == pytest.approx(np.full(2 * WINDOW + 1, 3.25))
+    assert need[awake_kpa][41 + WINDOW:].max() == pytest.approx(0.75)
     beside = np.zeros(SECTORS, dtype=bool)
     beside[90 - WINDOW: 91 + WINDOW] = True
-    assert need[LOWEST_CPAP_KPA][beside] == pytest.approx(np.full(beside.sum(), 2.25))
-    assert need[LOWEST_CPAP_KPA][~beside] == pytest.approx(np.full(SECTORS - beside.sum(), 1.0))
+    assert need[LOWEST_CPAP_KPA][beside] == pytest.approx(np.full(beside.sum(), 2.0))
+    assert need[LOWEST_CPAP_KPA][~beside] == pytest.approx(np.full(SECTORS - beside.sum(), 0.75))
     lifted = needed_reach((state(None, 40, 2.0), state(4.0, 90, 1.0, lifted=True)), awake, awake_kpa)
-    assert lifted[LOWEST_CPAP_KPA] == pytest.approx(np.full(SECTORS, MARGIN_MM))
-    assert width_for(np.array([3.5]), 0.5, awake_kpa)[0] < width_for(np.array([3.5]), 0.5, LOWEST_CPAP_KPA)[0] - 2.0
+    assert MARGIN_MM == 0.75 and lifted[LOWEST_CPAP_KPA] == pytest.approx(np.full(SECTORS, MARGIN_MM))
+    assert width_for(np.array([3.25]), 0.5, awake_kpa)[0] < width_for(np.array([3.25]), 0.5, LOWEST_CPAP_KPA)[0] - 2.0
 
 
 def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():

@@ -39,7 +39,7 @@ from ..evaluation.membrane import reach_mm, width_for
 from ..evaluation.rim import SECTORS
 from ..evaluation.states import CPAP_RANGE_CMH2O, FaceState, StateFit, fit_states, sleep_states
 
-MARGIN_MM, MARGIN_SHARE = 1.0, 0.25
+MARGIN_MM, MARGIN_SHARE = 0.75, 0.25
 WIDEST_MM = 8.0  # the most any rim point's membrane need reach: a stock full-face flap's
 WINDOW = SECTORS // AROUND  # sectors each side: a control column's share of the rim
 INWARD_SHARE = 0.7  # of the width at which neighbouring flaps meet: the free edge then runs 0.3 times the length of its root
@@ -159,7 +159,9 @@ def with_flaps(
     `params.membrane_mm` throughout."""
     def sized_for(widths: np.ndarray) -> Cushion:
         flaps = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
-        return flaps if need is None else replace(flaps, membrane_thickness=flap_thickness(need, widths, params.membrane_mm))
+        if need is None:
+            return flaps
+        return replace(flaps, membrane_thickness=flap_thickness(need, np.minimum(widths, built_widths(flaps)), params.membrane_mm))
 
     for _ in range(SHRINKS + 1):
         sized = sized_for(widths)
@@ -176,6 +178,14 @@ def with_flaps(
         widths = SHRINK * widths
         sized = sized_for(widths)
     return sized, solid, thinnest
+
+
+def built_widths(cushion: Cushion) -> np.ndarray:
+    """(AROUND,) mm: how far each control column's flap, as built, reaches from the seal curve to its
+    free edge in a straight line (as the evaluation reads a flap across its section,
+    `membrane.rim_membrane`): laid along skin that curves under it, shorter than the width asked."""
+    reach = np.linalg.norm(cushion.membrane_grid(AROUND, 2)[:, -1] - cushion.grid(AROUND, 2)[:, 0], axis=1)
+    return np.roll(reach, 1)  # grid point k lies on column k + 1 (`Cushion.membrane_thickness_at`)
 
 
 def tapered(widths: np.ndarray) -> np.ndarray:
