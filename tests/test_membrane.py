@@ -63,6 +63,19 @@ def test_the_designed_membrane_is_found_on_the_cushion_as_wide_and_thick_as_desi
     assert np.median(np.abs(rim.membrane_thickness_mm - thick)[rim.membrane_mm > 0]) < 0.05
 
 
+def test_each_flap_as_built_reaches_the_margin_at_the_lowest_pressure(designed):
+    """Each control column's flap, as built (seal curve to free edge in a straight line, however the
+    skin under it curves), at its set thickness, reaches the prediction's margin (0.75 mm) at 4
+    cmH2O within 0.01 mm, unless it is already at the thinnest sheet (the flap laid along skin
+    that curves under it is shorter than the width asked: its sheet is thinner to reach as far)."""
+    from cpapfit.cushion.envelope import MARGIN_MM, THINNEST_MM, built_widths
+
+    _, d = designed
+    thick = d.cushion.membrane_thickness
+    reach = reach_mm(built_widths(d.cushion), thick, P4)
+    assert (reach[thick > THINNEST_MM + 1e-3] >= MARGIN_MM - 0.01).all()
+
+
 def test_the_membrane_closes_the_opening_it_reaches_and_leaks_past_it(designed, placed_subjects):
     """The custom cushion pushed 4 mm sideways: with no membrane its wall opens; a 10 mm flap (reach
     4.06 mm at 10 cmH2O) closes each opening by its reach (what is left leaks), and lowers the leak."""
@@ -192,6 +205,33 @@ def test_a_membrane_is_as_thick_column_by_column_as_it_is_set():
         assert np.median(thick[flap & np.isin(column, half)]) == pytest.approx(mm, abs=0.02)
     edges = [np.median(thick[flap & (column == c)]) for c in (0, AROUND // 2 - 1, AROUND // 2, AROUND - 1)]
     assert max(edges[0], edges[1]) < 0.4 < min(edges[2], edges[3])  # each column as set, not its neighbour's
+
+
+def test_a_flap_as_built_reaches_from_the_seal_to_its_free_edge_column_by_column():
+    """Flaps from a 20 mm seal circle inwards, 6 and 9 mm wide on alternate control columns:
+    laid flat, `built_widths` reads each column's own width within 0.01 mm; bent down over a
+    rounded edge of 6 mm radius (the same lengths along the sheet), their chord 2 r sin(w / 2 r),
+    5.75 and 8.18 mm, within 0.01 mm: shorter than asked, as the evaluation reads them."""
+    from cpapfit.cushion.envelope import built_widths
+    from cpapfit.cushion.nurbs import AROUND, MEMBRANE_ROWS, Cushion, CushionParams, periodic_interpolation
+
+    angle = np.linspace(0.0, 2 * np.pi, AROUND, endpoint=False)
+    out = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(AROUND)])
+    width = np.where(np.arange(AROUND) % 2 == 0, 6.0, 9.0)
+    along = width[:, None] * np.arange(MEMBRANE_ROWS) / (MEMBRANE_ROWS - 1)  # (AROUND, rows) mm along the sheet
+
+    def net(rows):
+        return np.stack([periodic_interpolation(rows[:, j]) for j in range(rows.shape[1])], axis=1)
+
+    wall = net(np.stack([20.0 * out + [0.0, 0.0, z] for z in (0.0, 5.0, 10.0, 15.0)], axis=1))
+    flat = net(out[:, None] * (20.0 - along)[..., None])
+    radius = 6.0
+    inward, down = radius * np.sin(along / radius), radius * (1.0 - np.cos(along / radius))
+    bent = net(out[:, None] * (20.0 - inward)[..., None] - down[..., None] * [0.0, 0.0, 1.0])
+    z, y = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    assert built_widths(Cushion("nasal", wall, z, y, CushionParams(), flat)) == pytest.approx(width, abs=0.01)
+    chord = 2 * radius * np.sin(width / (2 * radius))
+    assert built_widths(Cushion("nasal", wall, z, y, CushionParams(), bent)) == pytest.approx(chord, abs=0.01)
 
 
 def test_the_membrane_joined_with_its_slivers_collapsed_is_the_same_cushion_to_a_print_resolution(designed, monkeypatch):

@@ -18,9 +18,11 @@ still turns back on itself or closes up across the seal (`twisted_columns`), tho
 by SHRINK, and the whole membrane while its solid would cross itself; beside a stretch of a face's
 own flaps (not the stock family's) so narrowed, its neighbours step down to it by at most TAPER_MM
 a column (`tapered`: a sudden step in width folds the sheet beside it, which would narrow it
-further there). Where a flap so narrowed falls short of its need, its sheet is thinner, down to
-THINNEST_MM (`flap_thickness`): the reach grows as the cube of the thickness falls, so a flap that
-cannot widen still closes the opening.
+further there). Where a flap falls short of its need, its sheet is thinner, down to THINNEST_MM
+(`flap_thickness`): the reach grows as the cube of the thickness falls, so a flap that cannot
+widen still closes the opening. A flap falls short where it was narrowed, and where it is laid
+along skin that curves under it: it then runs from the seal curve to its free edge in a straight
+line (`built_widths`, as the evaluation reads a flap across its section) shorter than asked.
 """
 
 from dataclasses import replace
@@ -154,8 +156,8 @@ def with_flaps(
     slivers `with_membrane` collapses), by SHRINK at most
     SHRINKS times each. `need` {CPAP kPa: (AROUND,) mm}: the reach each column's flap must have at
     each pressure; the flaps are then sized for this face: the neighbours of the columns each
-    narrowing takes in step down to them (`tapered`), and where a flap is narrower than reaches its need, its sheet is
-    thinner (`flap_thickness`). None (the stock family's flaps, modelled once): neither, and
+    narrowing takes in step down to them (`tapered`), and where a flap as built (`built_widths`) is narrower than
+    reaches its need, its sheet is thinner (`flap_thickness`). None (the stock family's flaps, modelled once): neither, and
     `params.membrane_mm` throughout."""
     def sized_for(widths: np.ndarray) -> Cushion:
         flaps = design_cushion(contact, axis, up, nose_tip, params, preload_mm, widths, skin)
@@ -182,8 +184,10 @@ def with_flaps(
 
 def built_widths(cushion: Cushion) -> np.ndarray:
     """(AROUND,) mm: how far each control column's flap, as built, reaches from the seal curve to its
-    free edge in a straight line (as the evaluation reads a flap across its section,
-    `membrane.rim_membrane`): laid along skin that curves under it, shorter than the width asked."""
+    free edge in a straight line, as the evaluation reads a flap across its section (from the rim
+    point, `membrane.rim_membrane`, which may lie across the flange from the seal curve): laid along
+    skin that curves under it, shorter than the width asked; on flat skin a little longer (its free
+    edge stands off the skin), which is why `with_flaps` takes the lesser."""
     reach = np.linalg.norm(cushion.membrane_grid(AROUND, 2)[:, -1] - cushion.grid(AROUND, 2)[:, 0], axis=1)
     return np.roll(reach, 1)  # grid point k lies on column k + 1 (`Cushion.membrane_thickness_at`)
 
