@@ -15,6 +15,7 @@ from ..thresholds import WALL_TOLERANCE
 from ..frozen import freeze_arrays
 
 SMOOTHING = (3.0, 6.0, 12.0)  # Gaussian widths tried for the pre-load, in seal-curve samples (of 128)
+CORRECTIONS = 4  # the most times the pre-load is corrected by pressing the cushion it gives
 
 
 @dataclass(frozen=True)
@@ -32,15 +33,29 @@ def compensated_cushion(
     contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
 ) -> tuple[Cushion, Preload, trimesh.Trimesh, float]:
     """(cushion, pre-load, solid, thinnest wall mm). The pre-load comes from the tissue model, is
-    corrected once by pressing the cushion it gives onto the face, and is smoothed by the least
-    of SMOOTHING whose solid keeps the set wall thickness and does not fold into itself."""
+    corrected by pressing the cushion it gives onto the face (`corrected`), and is smoothed by the
+    least of SMOOTHING whose solid keeps the set wall thickness and does not fold into itself."""
     for smoothing in SMOOTHING:
         preload = compensating_preload(contact.curve, contact.normals, face.axis, warped, smoothing, fit_params)
-        first = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)
-        pressed = fit_cushion(cushion_sheet(first), face, params.flange_mm, None, fit_params)
-        preload = refined_preload(preload, contact.curve, pressed, smoothing, fit_params)
+        preload = corrected(preload, contact, face, warped, params, fit_params, smoothing)
         cushion = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)
         solid, wall, folds = cushion_solid(cushion, contact.normals)
         if wall >= WALL_TOLERANCE * params.wall_mm and folds == 0:
             break
     return cushion, Preload(preload, smoothing), solid, wall
+
+
+def corrected(
+    preload: np.ndarray, contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams, smoothing: float,
+) -> np.ndarray:
+    """(K,) mm: the pre-load (K,) mm along the seal curve corrected by what pressing the cushion it
+    gives at the recommended force does (`refined_preload`): once, then again while some of the
+    covered rim presses outside the safe window, CORRECTIONS times at most (a narrow peak, where the
+    correction is clipped and smoothed, takes several)."""
+    for done in range(CORRECTIONS):
+        pressed = fit_cushion(cushion_sheet(design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)),
+                              face, params.flange_mm, None, fit_params)
+        if done and pressed.window_fraction == 1.0:
+            break
+        preload = refined_preload(preload, contact.curve, pressed, smoothing, fit_params)
+    return preload

@@ -82,6 +82,11 @@ class CushionFit:
     def __post_init__(self):
         freeze_arrays(self)
 
+    @property
+    def window_fraction(self) -> float:
+        """The share of the covered rim pressing within the safe window."""
+        return _window_share(self.pressure_kpa[self.rim.covered], self.window_kpa)
+
     def summary(self) -> dict:
         """The numbers of fit.json for this cushion (over the covered rim)."""
         c = self.rim.covered
@@ -95,7 +100,7 @@ class CushionFit:
             "pressure_max_kpa": float(p[top]),
             "pressure_max_mmhg": float(p[top] * MMHG_PER_KPA),
             "pressure_max_region": self.stiffness.region[np.flatnonzero(c)[top]],
-            "window_fraction": _window_share(p, self.window_kpa),
+            "window_fraction": self.window_fraction,
             "leak_l_min": float(self.leak_l_min[c].sum()),
             "seal_force_n": self.seal_force_n,
             "headgear_force_n": round(self.force_n, 3),
