@@ -8,7 +8,11 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
+from cpapfit.cushion.compensation import corrected
 from cpapfit.cushion.envelope import PEAK_MARGIN_KPA, headgear_force
+from cpapfit.cushion.generic import NOSE_TIP
+from cpapfit.cushion.nurbs import design_cushion
+from cpapfit.cushion.solid import cushion_sheet
 from cpapfit.evaluation.ceiling import ceilings
 from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_cushion, fit_rim, peak_force, refined_preload, window_force
 from cpapfit.evaluation.leak import leak_l_min
@@ -601,6 +605,24 @@ def test_compensation_evens_out_the_rim_pressure(designed, placed_subjects):
     p = fit.pressure_kpa[fit.rim.covered]
     assert np.median(p) == pytest.approx(d.fit_params.target_kpa, abs=0.3)
     assert d.preload.mm.min() == 0.0 and d.preload.mm.max() > 0.5  # soft tissue gets more pre-load
+
+
+def test_a_narrow_peak_one_correction_leaves_is_corrected_into_the_window(designed, placed_subjects):
+    """The design's pre-load set 5 mm deeper over 3 seal samples (of 128) presses a narrow peak over
+    capillary closing at the recommended force. One correction, clipped to STEP_MM and smoothed,
+    leaves it there; `corrected` presses and corrects again until the whole rim lies in the window."""
+    ph, d = designed
+    face = face_for(placed_subjects(ph.seed)[1], d.alignment, d.registration)
+    contact, warped, params, fp = d.contact, d.registration.vertices, d.cushion.params, d.fit_params
+
+    def pressed(preload):
+        sheet = cushion_sheet(design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload))
+        return fit_cushion(sheet, face, params.flange_mm, None, fp)
+
+    bumped = d.preload.mm + np.where(np.abs(np.arange(len(d.preload.mm)) - 60) <= 1, 5.0, 0.0)
+    once = pressed(refined_preload(bumped, contact.curve, pressed(bumped), d.preload.smoothing, fp))
+    assert once.window_fraction < 0.99 and once.pressure_kpa[once.rim.covered].max() > fp.capillary_kpa
+    assert pressed(corrected(bumped, contact, face, warped, params, fp, d.preload.smoothing)).window_fraction == 1.0
 
 
 def test_a_point_cloud_edge_in_a_row_does_not_tilt_the_skin_away():
