@@ -8,13 +8,11 @@ import trimesh
 from scipy.spatial import Delaunay
 
 from cpapfit.errors import InputError
-from cpapfit.cushion.compensation import corrected
+from cpapfit.cushion import compensation
+from cpapfit.cushion.compensation import corrected, pressed
 from cpapfit.cushion.envelope import PEAK_MARGIN_KPA, headgear_force
-from cpapfit.cushion.generic import NOSE_TIP
-from cpapfit.cushion.nurbs import design_cushion
-from cpapfit.cushion.solid import cushion_sheet
 from cpapfit.evaluation.ceiling import ceilings
-from cpapfit.evaluation.fit import STEP_MM, FitParams, fit_cushion, fit_rim, peak_force, refined_preload, window_force
+from cpapfit.evaluation.fit import MAX_PRELOAD_MM, STEP_MM, FitParams, fit_cushion, fit_rim, peak_force, refined_preload, window_force
 from cpapfit.evaluation.leak import leak_l_min
 from cpapfit.evaluation.mechanics import Flaps, least_force_n, press
 from cpapfit.evaluation.membrane import ROOT_MM
@@ -116,7 +114,7 @@ def test_a_rim_jumping_between_its_flanges_edges_seals_no_longer_a_stretch():
 
 
 def test_the_preload_is_corrected_where_the_flanges_outer_edge_presses():
-    """Pressing the compensated cushion once corrects each seal point's pre-load by its own
+    """One pressing of the compensated cushion corrects each seal point's pre-load by its own
     sector's rim point, wherever across the 5 mm flange that lies: an outer edge 5 mm out pressing
     5 kPa lowers the pre-load there by the full step against the rest of the rim (pressing the
     target); a rim point 12 mm out, beyond the flange and NEAR_MM, corrects nothing."""
@@ -607,22 +605,24 @@ def test_compensation_evens_out_the_rim_pressure(designed, placed_subjects):
     assert d.preload.mm.min() == 0.0 and d.preload.mm.max() > 0.5  # soft tissue gets more pre-load
 
 
-def test_a_narrow_peak_one_correction_leaves_is_corrected_into_the_window(designed, placed_subjects):
-    """The design's pre-load set 5 mm deeper over 3 seal samples (of 128) presses a narrow peak over
-    capillary closing at the recommended force. One correction, clipped to STEP_MM and smoothed,
-    leaves it there; `corrected` presses and corrects again until the whole rim lies in the window."""
+def test_a_narrow_peak_left_by_one_correction_is_corrected_into_the_window(designed, placed_subjects, monkeypatch):
+    """The design's pre-load set 5 mm deeper over 3 seal samples (of 128), within MAX_PRELOAD_MM,
+    presses a narrow peak over capillary closing at the recommended force. One correction, clipped
+    to STEP_MM and smoothed, leaves it there; `corrected` presses and corrects again until the whole
+    rim lies in the window. A pre-load whose first correction fills the window is corrected once."""
     ph, d = designed
     face = face_for(placed_subjects(ph.seed)[1], d.alignment, d.registration)
-    contact, warped, params, fp = d.contact, d.registration.vertices, d.cushion.params, d.fit_params
-
-    def pressed(preload):
-        sheet = cushion_sheet(design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload))
-        return fit_cushion(sheet, face, params.flange_mm, None, fp)
-
-    bumped = d.preload.mm + np.where(np.abs(np.arange(len(d.preload.mm)) - 60) <= 1, 5.0, 0.0)
-    once = pressed(refined_preload(bumped, contact.curve, pressed(bumped), d.preload.smoothing, fp))
-    assert once.window_fraction < 0.99 and once.pressure_kpa[once.rim.covered].max() > fp.capillary_kpa
-    assert pressed(corrected(bumped, contact, face, warped, params, fp, d.preload.smoothing)).window_fraction == 1.0
+    given = d.contact, face, d.registration.vertices, d.cushion.params, d.fit_params
+    bump = np.where(np.abs(np.arange(len(d.preload.mm)) - 60) <= 1, 5.0, 0.0)
+    bumped = np.minimum(d.preload.mm + bump, MAX_PRELOAD_MM)
+    assert pressed(corrected(bumped, *given, d.preload.smoothing), *given).window_fraction == 1.0
+    monkeypatch.setattr(compensation, "CORRECTIONS", 1)
+    once = pressed(corrected(bumped, *given, d.preload.smoothing), *given)
+    assert once.window_fraction < 0.99 and once.pressure_kpa[once.rim.covered].max() > d.fit_params.capillary_kpa
+    again = corrected(d.preload.mm, *given, d.preload.smoothing)
+    monkeypatch.undo()
+    assert pressed(again, *given).window_fraction == 1.0
+    assert np.array_equal(corrected(d.preload.mm, *given, d.preload.smoothing), again)
 
 
 def test_a_point_cloud_edge_in_a_row_does_not_tilt_the_skin_away():

@@ -10,7 +10,7 @@ from .contact import Contact
 from .generic import NOSE_TIP
 from .nurbs import Cushion, CushionParams, design_cushion
 from .solid import cushion_sheet, cushion_solid
-from ..evaluation.fit import Face, FitParams, compensating_preload, fit_cushion, refined_preload
+from ..evaluation.fit import CushionFit, Face, FitParams, compensating_preload, fit_cushion, refined_preload
 from ..thresholds import WALL_TOLERANCE
 from ..frozen import freeze_arrays
 
@@ -46,16 +46,26 @@ def compensated_cushion(
 
 
 def corrected(
-    preload: np.ndarray, contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams, smoothing: float,
+    preload: np.ndarray, contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
+    smoothing: float,
 ) -> np.ndarray:
     """(K,) mm: the pre-load (K,) mm along the seal curve corrected by what pressing the cushion it
-    gives at the recommended force does (`refined_preload`): once, then again while some of the
-    covered rim presses outside the safe window, CORRECTIONS times at most (a narrow peak, where the
-    correction is clipped and smoothed, takes several)."""
+    gives at the recommended force does (`refined_preload`, each correction smoothed by a Gaussian
+    of `smoothing` seal-curve samples): once, then again while some of the covered rim presses
+    outside the safe window, CORRECTIONS times at most (a narrow peak, where the correction is
+    clipped and smoothed, takes several)."""
     for done in range(CORRECTIONS):
-        pressed = fit_cushion(cushion_sheet(design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)),
-                              face, params.flange_mm, None, fit_params)
-        if done and pressed.window_fraction == 1.0:
+        fit = pressed(preload, contact, face, warped, params, fit_params)
+        if done and fit.window_fraction == 1.0:
             break
-        preload = refined_preload(preload, contact.curve, pressed, smoothing, fit_params)
+        preload = refined_preload(preload, contact.curve, fit, smoothing, fit_params)
     return preload
+
+
+def pressed(
+    preload: np.ndarray, contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
+) -> CushionFit:
+    """The cushion with `preload` (K,) mm along the seal curve, as a sheet, pressed onto `face` at
+    its recommended force."""
+    sheet = cushion_sheet(design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload))
+    return fit_cushion(sheet, face, params.flange_mm, None, fit_params)

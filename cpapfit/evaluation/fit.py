@@ -84,7 +84,7 @@ class CushionFit:
 
     @property
     def window_fraction(self) -> float:
-        """The share of the covered rim pressing within the safe window."""
+        """The share (0 to 1) of the covered rim pressing within the safe window at this fit's force."""
         return _window_share(self.pressure_kpa[self.rim.covered], self.window_kpa)
 
     def summary(self) -> dict:
