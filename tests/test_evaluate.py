@@ -605,6 +605,17 @@ def test_compensation_evens_out_the_rim_pressure(designed, placed_subjects):
     assert d.preload.mm.min() == 0.0 and d.preload.mm.max() > 0.5  # soft tissue gets more pre-load
 
 
+@pytest.mark.parametrize("shares, kept", [((0.8, 1.0, 1.0), 1), ((0.8, 0.9, 0.85, 1.0), 1), ((0.8, 0.9, 0.95, 0.97, 0.99, 1.0), 4)])
+def test_the_preload_is_corrected_while_each_correction_brings_more_of_the_rim_into_the_window(shares, kept, monkeypatch):
+    """`corrected` corrects once, then again while the rim is not all in the window and the next
+    correction brings more of it in, CORRECTIONS (4) times at most, and keeps the last that did: the
+    pre-load here counts its corrections, `shares[n]` the window share after n."""
+    monkeypatch.setattr(compensation, "pressed", lambda preload, *given: SimpleNamespace(window_fraction=shares[int(preload[0])]))
+    monkeypatch.setattr(compensation, "refined_preload", lambda preload, *given: preload + 1.0)
+    assert compensation.CORRECTIONS == 4
+    assert corrected(np.zeros(128), SimpleNamespace(curve=None), None, None, None, None, 3.0)[0] == kept
+
+
 def test_a_narrow_peak_left_by_one_correction_is_corrected_into_the_window(designed, placed_subjects, monkeypatch):
     """The design's pre-load set 5 mm deeper over 3 seal samples (of 128), within MAX_PRELOAD_MM,
     presses a narrow peak over capillary closing at the recommended force. One correction, clipped

@@ -52,13 +52,20 @@ def corrected(
     """(K,) mm: the pre-load (K,) mm along the seal curve corrected by what pressing the cushion it
     gives at the recommended force does (`refined_preload`, each correction smoothed by a Gaussian
     of `smoothing` seal-curve samples): once, then again while some of the covered rim presses
-    outside the safe window, CORRECTIONS times at most (a narrow peak, where the correction is
-    clipped and smoothed, takes several)."""
-    for done in range(CORRECTIONS):
-        fit = pressed(preload, contact, face, warped, params, fit_params)
-        if done and fit.window_fraction == 1.0:
+    outside the safe window and each correction brings more of it in, CORRECTIONS times at most (a
+    narrow peak, where the correction is clipped and smoothed, takes several; where part of the rim
+    cannot be brought in, in a crease whose pre-load stands at its limit, more let the rest out)."""
+    fit = pressed(preload, contact, face, warped, params, fit_params)
+    preload = refined_preload(preload, contact.curve, fit, smoothing, fit_params)
+    fit = pressed(preload, contact, face, warped, params, fit_params)
+    for _ in range(CORRECTIONS - 1):
+        if fit.window_fraction == 1.0:
             break
-        preload = refined_preload(preload, contact.curve, fit, smoothing, fit_params)
+        again = refined_preload(preload, contact.curve, fit, smoothing, fit_params)
+        fit_again = pressed(again, contact, face, warped, params, fit_params)
+        if fit_again.window_fraction <= fit.window_fraction:
+            break
+        preload, fit = again, fit_again
     return preload
 
 
