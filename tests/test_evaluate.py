@@ -608,12 +608,14 @@ def test_compensation_evens_out_the_rim_pressure(designed, placed_subjects):
 @pytest.mark.parametrize("shares, kept", [((0.8, 1.0, 1.0), 1), ((0.8, 0.9, 0.85, 1.0), 1), ((0.8, 0.9, 0.95, 0.97, 0.99, 1.0), 4)])
 def test_the_preload_is_corrected_while_each_correction_brings_more_of_the_rim_into_the_window(shares, kept, monkeypatch):
     """`corrected` corrects once, then again while the rim is not all in the window and the next
-    correction brings more of it in, CORRECTIONS (4) times at most, and keeps the last that did: the
-    pre-load here counts its corrections, `shares[n]` the window share after n."""
-    monkeypatch.setattr(compensation, "pressed", lambda preload, *given: SimpleNamespace(window_fraction=shares[int(preload[0])]))
+    correction brings more of it in, CORRECTIONS (4) times at most, and keeps the last that did, with
+    its cushion: the pre-load here counts its corrections, `shares[n]` the window share after n, and
+    its cushion is that count."""
+    monkeypatch.setattr(compensation, "pressed", lambda preload, *given: (int(preload[0]), SimpleNamespace(window_fraction=shares[int(preload[0])])))
     monkeypatch.setattr(compensation, "refined_preload", lambda preload, *given: preload + 1.0)
     assert compensation.CORRECTIONS == 4
-    assert corrected(np.zeros(128), SimpleNamespace(curve=None), None, None, None, None, 3.0)[0] == kept
+    preload, cushion = corrected(np.zeros(128), SimpleNamespace(curve=None), None, None, None, None, 3.0)
+    assert preload[0] == kept and cushion == kept
 
 
 def test_a_narrow_peak_left_by_one_correction_is_corrected_into_the_window(designed, placed_subjects, monkeypatch):
@@ -626,14 +628,14 @@ def test_a_narrow_peak_left_by_one_correction_is_corrected_into_the_window(desig
     given = d.contact, face, d.registration.vertices, d.cushion.params, d.fit_params
     bump = np.where(np.abs(np.arange(len(d.preload.mm)) - 60) <= 1, 5.0, 0.0)
     bumped = np.minimum(d.preload.mm + bump, MAX_PRELOAD_MM)
-    assert pressed(corrected(bumped, *given, d.preload.smoothing), *given).window_fraction == 1.0
+    assert pressed(corrected(bumped, *given, d.preload.smoothing)[0], *given)[1].window_fraction == 1.0
     monkeypatch.setattr(compensation, "CORRECTIONS", 1)
-    once = pressed(corrected(bumped, *given, d.preload.smoothing), *given)
+    once = pressed(corrected(bumped, *given, d.preload.smoothing)[0], *given)[1]
     assert once.window_fraction < 0.99 and once.pressure_kpa[once.rim.covered].max() > d.fit_params.capillary_kpa
-    again = corrected(d.preload.mm, *given, d.preload.smoothing)
+    again = corrected(d.preload.mm, *given, d.preload.smoothing)[0]
     monkeypatch.undo()
-    assert pressed(again, *given).window_fraction == 1.0
-    assert np.array_equal(corrected(d.preload.mm, *given, d.preload.smoothing), again)
+    assert pressed(again, *given)[1].window_fraction == 1.0
+    assert np.array_equal(corrected(d.preload.mm, *given, d.preload.smoothing)[0], again)
 
 
 def test_a_point_cloud_edge_in_a_row_does_not_tilt_the_skin_away():

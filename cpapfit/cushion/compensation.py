@@ -37,8 +37,7 @@ def compensated_cushion(
     least of SMOOTHING whose solid keeps the set wall thickness and does not fold into itself."""
     for smoothing in SMOOTHING:
         preload = compensating_preload(contact.curve, contact.normals, face.axis, warped, smoothing, fit_params)
-        preload = corrected(preload, contact, face, warped, params, fit_params, smoothing)
-        cushion = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)
+        preload, cushion = corrected(preload, contact, face, warped, params, fit_params, smoothing)
         solid, wall, folds = cushion_solid(cushion, contact.normals)
         if wall >= WALL_TOLERANCE * params.wall_mm and folds == 0:
             break
@@ -48,31 +47,32 @@ def compensated_cushion(
 def corrected(
     preload: np.ndarray, contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
     smoothing: float,
-) -> np.ndarray:
-    """(K,) mm: the pre-load (K,) mm along the seal curve corrected by what pressing the cushion it
+) -> tuple[np.ndarray, Cushion]:
+    """((K,) mm, cushion): the pre-load (K,) mm along the seal curve corrected by what pressing the cushion it
     gives at the recommended force does (`refined_preload`, each correction smoothed by a Gaussian
     of `smoothing` seal-curve samples): once, then again while some of the covered rim presses
     outside the safe window and each correction brings more of it in, CORRECTIONS times at most (a
     narrow peak, where the correction is clipped and smoothed, takes several; where part of the rim
-    cannot be brought in, in a crease whose pre-load stands at its limit, more let the rest out)."""
-    fit = pressed(preload, contact, face, warped, params, fit_params)
+    cannot be brought in, in a crease whose pre-load stands at its limit, more let the rest out),
+    and the cushion the corrected pre-load gives."""
+    fit = pressed(preload, contact, face, warped, params, fit_params)[1]
     preload = refined_preload(preload, contact.curve, fit, smoothing, fit_params)
-    fit = pressed(preload, contact, face, warped, params, fit_params)
+    cushion, fit = pressed(preload, contact, face, warped, params, fit_params)
     for _ in range(CORRECTIONS - 1):
         if fit.window_fraction == 1.0:
             break
         again = refined_preload(preload, contact.curve, fit, smoothing, fit_params)
-        fit_again = pressed(again, contact, face, warped, params, fit_params)
+        cushion_again, fit_again = pressed(again, contact, face, warped, params, fit_params)
         if fit_again.window_fraction <= fit.window_fraction:
             break
-        preload, fit = again, fit_again
-    return preload
+        preload, cushion, fit = again, cushion_again, fit_again
+    return preload, cushion
 
 
 def pressed(
     preload: np.ndarray, contact: Contact, face: Face, warped: np.ndarray, params: CushionParams, fit_params: FitParams,
-) -> CushionFit:
-    """The cushion with `preload` (K,) mm along the seal curve, as a sheet, pressed onto `face` at
-    its recommended force."""
-    sheet = cushion_sheet(design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload))
-    return fit_cushion(sheet, face, params.flange_mm, None, fit_params)
+) -> tuple[Cushion, CushionFit]:
+    """The cushion with `preload` (K,) mm along the seal curve, and it pressed as a sheet onto
+    `face` at its recommended force."""
+    cushion = design_cushion(contact, face.axis, face.up, warped[NOSE_TIP], params, preload)
+    return cushion, fit_cushion(cushion_sheet(cushion), face, params.flange_mm, None, fit_params)
