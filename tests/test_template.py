@@ -2,12 +2,28 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from cpapfit.template import MASKS, N_LANDMARKS, canonical_face, load_template
+from cpapfit.template import MASKS, N_LANDMARKS, canonical_face, load_template, refined_template
 
 
 @pytest.fixture(scope="module")
 def template():
     return load_template()
+
+
+def test_the_shipped_template_is_the_one_refined_afresh(template):
+    """The shipped template (`tools/build_refined_template.py`) is the one `refined_template` makes now
+    from the canonical face: the same vertices to the bit, triangles, mirror pairs, features and
+    contact regions (curves, bands, their geodesic distances to the bit)."""
+    fresh = refined_template()
+    for name in ("vertices", "faces", "mirror"):
+        shipped, made = getattr(template, name), getattr(fresh, name)
+        assert shipped.dtype == made.dtype and np.array_equal(shipped, made), name
+    assert list(template.features) == list(fresh.features)
+    assert all(np.array_equal(template.features[k], fresh.features[k]) for k in fresh.features)
+    for mask in MASKS:
+        shipped, made = template.regions[mask], fresh.regions[mask]
+        assert (shipped.name, shipped.half_width_mm) == (made.name, made.half_width_mm)
+        assert all(np.array_equal(getattr(shipped, k), getattr(made, k)) for k in ("curve", "band", "distance")), mask
 
 
 def test_refined_to_about_30000_vertices_in_mm(template):

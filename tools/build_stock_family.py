@@ -1,6 +1,6 @@
 """Rebuild the stock cushion family's shipped data in cpapfit/cushion/data/: stock_population.npz
 (`cpapfit.cushion.population.drawn`: 200 faces of the shipped ICT model, the sizing gauge's measure
-and the seal curve's depths on each), drawn again from the shipped model and template, then
+and the seal curve's depths on each), drawn again from the shipped model and template (`tools/build_refined_template.py`), then
 stock_solids.npz (`cpapfit.cushion.stock.solids_bytes`: every size's solid, made from that population).
 
 Usage (needs the project venv; no ../shared: it reads the shipped model):

@@ -7,7 +7,8 @@ range. mediapipe 0.10.21's geometry_pipeline_metadata_pb2 parses it.
 
 Usage (needs npm and the project venv):
     python tools/build_template_data.py [--package DIR]
-Without --package the script runs `npm pack @mediapipe/face_mesh` in a temporary folder.
+Without --package the script runs `npm pack @mediapipe/face_mesh` in a temporary folder. The
+refined template is made from it: run `tools/build_refined_template.py` after this.
 """
 
 import argparse

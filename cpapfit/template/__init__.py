@@ -4,6 +4,7 @@ Frame: x to the subject's left (image right), y up, z out of the face; millimetr
 i < 468 of the refined template is MediaPipe Face Mesh landmark i.
 """
 
+import io
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -12,8 +13,8 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays
-from ..shipped import json_data
-from .regions import contact_region
+from ..shipped import json_data, npz
+from .regions import ContactRegion, contact_region
 
 N_LANDMARKS = 468
 SUBDIVISIONS = 3  # Loop subdivision rounds: 468 -> 28 881 vertices
@@ -60,8 +61,20 @@ def canonical_face() -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(data["vertices_cm"], dtype=np.float64) * 10.0, np.asarray(data["faces"], dtype=np.int64)
 
 
+TEMPLATE_FILE = "template.npz"
+
+
 @lru_cache(maxsize=1)
 def load_template() -> Template:
+    """The refined template as shipped (`template_bytes`, by tools/build_refined_template.py: `refined_template`'s, the same to the bit)."""
+    data = npz(__package__, TEMPLATE_FILE)
+    regions = {m: ContactRegion(m, data[f"{m}_curve"], data[f"{m}_band"], data[f"{m}_distance"], float(data[f"{m}_half_width_mm"]))
+               for m in MASKS}
+    features = {k.removeprefix("feature_"): data[k] for k in data.files if k.startswith("feature_")}
+    return Template(vertices=data["vertices"], faces=data["faces"], regions=regions, features=features, mirror=data["mirror"])
+
+
+def refined_template() -> Template:
     """The canonical face refined by Loop subdivision (~29 000 vertices), with both contact regions."""
     coarse_v, coarse_f = canonical_face()
     vertices, faces = trimesh.remesh.subdivide_loop(coarse_v, coarse_f, iterations=SUBDIVISIONS)
@@ -71,6 +84,19 @@ def load_template() -> Template:
     features = {k: np.asarray(v, dtype=np.int64) for k, v in _data("canonical_face.json")["features"].items()}
     mirror = cKDTree(vertices).query(vertices * [-1.0, 1.0, 1.0])[1]  # the canonical face is symmetric: exact pairs
     return Template(vertices=vertices, faces=faces, regions=regions, features=features, mirror=mirror)
+
+
+def template_bytes() -> bytes:
+    """The .npz file of `refined_template`, as shipped (it depends on no scan: made once, not at every start)."""
+    t = refined_template()
+    arrays = {"vertices": t.vertices, "faces": t.faces, "mirror": t.mirror}
+    for m, region in t.regions.items():
+        arrays |= {f"{m}_curve": region.curve, f"{m}_band": region.band, f"{m}_distance": region.distance,
+                   f"{m}_half_width_mm": np.float64(region.half_width_mm)}
+    arrays |= {f"feature_{k}": v for k, v in t.features.items()}
+    out = io.BytesIO()
+    np.savez_compressed(out, **arrays)
+    return out.getvalue()
 
 
 def central_face(template: Template, radius_mm: float = 60.0) -> np.ndarray:
