@@ -1,5 +1,6 @@
 """The stages strung together. Each stage is a pure function; this module only sequences them."""
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Callable
@@ -196,7 +197,10 @@ def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage
     (`params`: the registration's; `quality`: the thresholds deciding which landmarks it keeps;
     `landmark_noise`: noise on the detected landmarks, for robustness studies)."""
     on_stage("landmarks and similarity")
-    al = align(scan, user_landmarks, landmark_noise)
+    with ThreadPoolExecutor(max_workers=1) as pool:  # the shape basis (0.5 s) made while the landmarks are found
+        if params.morphable:
+            pool.submit(template_basis, params.morphable.modes)
+        al = align(scan, user_landmarks, landmark_noise)
     on_stage("non-rigid registration")
     return Placement(*registered(scan, al, params, quality))
 
