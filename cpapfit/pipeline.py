@@ -240,10 +240,10 @@ def design(
     solid = written_clean(solid)
     checks = _checked(cushion, solid, (wall, params.wall_mm), membrane, f"the {mask} cushion", al.landmarks.path)
     on_stage("pressure and leak, casting mould, frame")
-    moulded = mould(cushion, solid)
-    frame = build_frame(cushion, solid)
-    frame_checks = check_closed(frame.mesh, "the frame")
-    fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params, faces=asleep)
+    with ThreadPoolExecutor(max_workers=1) as pool:  # the mould and the frame (manifold3d's booleans) made while the cushion is pressed
+        made = pool.submit(_mould_and_frame, cushion, solid)
+        fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params, faces=asleep)
+        moulded, frame, frame_checks = made.result()
     compared, unfitted = None, ""
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
@@ -255,6 +255,12 @@ def design(
             fits, states = fits | compared.fits, compared.beside(states)
     return Design(al, reg, contact, cushion, solid, checks, judged.rim, judged.quality, preload, moulded.parts, moulded.draft,
                   fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered), unfitted)
+
+
+def _mould_and_frame(cushion: Cushion, solid: trimesh.Trimesh) -> tuple:
+    """(the casting mould, the frame, the frame's `check_closed`) of a custom cushion and its solid."""
+    frame = build_frame(cushion, solid)
+    return mould(cushion, solid), frame, check_closed(frame.mesh, "the frame")
 
 
 @dataclass(frozen=True)
