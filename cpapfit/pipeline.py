@@ -29,7 +29,7 @@ from .errors import NoStockSeat
 from .fabrication.dead_space import dead_space_ml, ring_clearance
 from .fabrication.files import SolidError, check_closed, check_solid, written_clean
 from .fabrication.frame import Frame, build_frame
-from .fabrication.mould import mould
+from .fabrication.mould import Mould, mould
 from .quality.proportions import proportions
 from .quality.gates import Quality, assess, require_quality
 from .thresholds import QualityParams
@@ -197,10 +197,12 @@ def place_template(scan: Scan, user_landmarks: Landmarks | None = None, on_stage
     (`params`: the registration's; `quality`: the thresholds deciding which landmarks it keeps;
     `landmark_noise`: noise on the detected landmarks, for robustness studies)."""
     on_stage("landmarks and similarity")
+    load_template()  # once, before the two threads ask for it
     with ThreadPoolExecutor(max_workers=1) as pool:  # the shape basis (0.5 s) made while the landmarks are found
-        if params.morphable:
-            pool.submit(template_basis, params.morphable.modes)
+        basis = pool.submit(template_basis, params.morphable.modes) if params.morphable else None
         al = align(scan, user_landmarks, landmark_noise)
+    if basis:
+        basis.result()  # a basis that failed raises here, not made again
     on_stage("non-rigid registration")
     return Placement(*registered(scan, al, params, quality))
 
@@ -242,8 +244,10 @@ def design(
     on_stage("pressure and leak, casting mould, frame")
     with ThreadPoolExecutor(max_workers=1) as pool:  # the mould and the frame (manifold3d's booleans) made while the cushion is pressed
         made = pool.submit(_mould_and_frame, cushion, solid)
-        fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params, faces=asleep)
-        moulded, frame, frame_checks = made.result()
+        try:
+            fits, states = pressed_asleep(face, {"custom": solid}, mask, params, fit_params, faces=asleep)
+        finally:  # a mould or frame that fails its checks is the error reported
+            moulded, frame, frame_checks = made.result()
     compared, unfitted = None, ""
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
@@ -257,10 +261,11 @@ def design(
                   fits, fit_params, states, compared, frame, frame_checks, dead_space_ml(cushion, frame, face.registered), unfitted)
 
 
-def _mould_and_frame(cushion: Cushion, solid: trimesh.Trimesh) -> tuple:
+def _mould_and_frame(cushion: Cushion, solid: trimesh.Trimesh) -> tuple[Mould, Frame, dict]:
     """(the casting mould, the frame, the frame's `check_closed`) of a custom cushion and its solid."""
+    moulded = mould(cushion, solid)
     frame = build_frame(cushion, solid)
-    return mould(cushion, solid), frame, check_closed(frame.mesh, "the frame")
+    return moulded, frame, check_closed(frame.mesh, "the frame")
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from ..frozen import freeze_arrays
+from ..frozen import freeze_arrays, read_only
 from ..shipped import json_data, npz
 from .regions import ContactRegion, contact_region
 
@@ -66,11 +66,12 @@ TEMPLATE_FILE = "template.npz"
 
 @lru_cache(maxsize=1)
 def load_template() -> Template:
-    """The refined template as shipped (`template_bytes`, by tools/build_refined_template.py: `refined_template`'s, the same to the bit)."""
+    """The canonical face refined (~29 000 vertices), with both contact regions, as shipped
+    (`template_bytes`, written by tools/build_refined_template.py: `refined_template`, to the bit)."""
     data = npz(__package__, TEMPLATE_FILE)
     regions = {m: ContactRegion(m, data[f"{m}_curve"], data[f"{m}_band"], data[f"{m}_distance"], float(data[f"{m}_half_width_mm"]))
                for m in MASKS}
-    features = {k.removeprefix("feature_"): data[k] for k in data.files if k.startswith("feature_")}
+    features = {k.removeprefix("feature_"): read_only(data[k]) for k in data.files if k.startswith("feature_")}
     return Template(vertices=data["vertices"], faces=data["faces"], regions=regions, features=features, mirror=data["mirror"])
 
 
