@@ -7,14 +7,13 @@ The figures depend on no scan, so they are shipped (data/stock_population.npz, w
 figures against a fresh draw.
 """
 
-import io
 from functools import lru_cache
 
 import numpy as np
 
 from ..frozen import read_only
 from ..ict import random_subject, template_truth
-from ..shipped import npz
+from ..shipped import npz, npz_bytes
 from ..template import MASKS, load_template
 from .contact import template_curve
 from .generic import AXIS
@@ -59,6 +58,4 @@ def population_gauge(mask: str) -> np.ndarray:
 
 def population_bytes() -> bytes:
     """The .npz file of a fresh draw (`drawn`), as shipped."""
-    out = io.BytesIO()
-    np.savez_compressed(out, **{f"{mask}_{name}": figures for mask, pair in drawn().items() for name, figures in zip(("gauge", "depth"), pair)})
-    return out.getvalue()
+    return npz_bytes({f"{mask}_{name}": figures for mask, pair in drawn().items() for name, figures in zip(("gauge", "depth"), pair)})

@@ -18,7 +18,6 @@ Each size's solid ships (`stock_solid`; `tools/build_stock_family.py` makes them
 Template frame (mm): x to the face's left, y up, z out of it.
 """
 
-import io
 from functools import lru_cache
 
 import numpy as np
@@ -26,7 +25,7 @@ import trimesh
 
 from ..frozen import read_only
 from ..ict import ict_face, load_ict, template_truth
-from ..shipped import npz
+from ..shipped import npz, npz_bytes
 from ..template import load_template
 from .envelope import LOWEST_CPAP_KPA, flap_widths, with_flaps
 from .generic import AXIS, NOSE_TIP, UP, contact_on
@@ -80,11 +79,9 @@ def stock_solid(mask: str, size: str, params: CushionParams = CushionParams()) -
 
 def solids_bytes() -> bytes:
     """The .npz file of every stock size's solid made afresh (`stock_cushion`, default parameters), as shipped."""
-    out = io.BytesIO()
     solids = {(mask, size): stock_cushion(mask, size)[1] for mask in SIZES for size in SIZES[mask]}
-    np.savez_compressed(out, **{f"{mask}_{size}_{name}": array for (mask, size), solid in solids.items()
-                                for name, array in (("vertices", solid.vertices), ("faces", solid.faces))})
-    return out.getvalue()
+    return npz_bytes({f"{mask}_{size}_{name}": array for (mask, size), solid in solids.items()
+                      for name, array in (("vertices", solid.vertices), ("faces", solid.faces))})
 
 
 @lru_cache(maxsize=8)

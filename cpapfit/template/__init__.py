@@ -4,7 +4,6 @@ Frame: x to the subject's left (image right), y up, z out of the face; millimetr
 i < 468 of the refined template is MediaPipe Face Mesh landmark i.
 """
 
-import io
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -13,7 +12,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from ..frozen import freeze_arrays, read_only
-from ..shipped import json_data, npz
+from ..shipped import json_data, npz, npz_bytes
 from .regions import ContactRegion, contact_region
 
 N_LANDMARKS = 468
@@ -94,10 +93,7 @@ def template_bytes() -> bytes:
     for m, region in t.regions.items():
         arrays |= {f"{m}_curve": region.curve, f"{m}_band": region.band, f"{m}_distance": region.distance,
                    f"{m}_half_width_mm": np.float64(region.half_width_mm)}
-    arrays |= {f"feature_{k}": v for k, v in t.features.items()}
-    out = io.BytesIO()
-    np.savez_compressed(out, **arrays)
-    return out.getvalue()
+    return npz_bytes(arrays | {f"feature_{k}": v for k, v in t.features.items()})
 
 
 def central_face(template: Template, radius_mm: float = 60.0) -> np.ndarray:
