@@ -21,7 +21,6 @@ from .evaluation.fit import FitParams
 from .evaluation.rim import require_dense
 from .io import load_scan
 from .io.landmarks import user_landmarks
-from .io.phantom import write_phantom
 from .outputs import design_files, report_files
 from .pipeline import Design, evaluate as evaluated, evaluated_cushions, face_for, place_template, pressed_asleep
 from .pipeline import design as designed
@@ -81,6 +80,7 @@ class DesignResult:
 def phantom(seed: int, folder: str | Path, population: str = "ict", mouth_open_mm: float = 0.0) -> Path:
     """A synthetic subject (an RGB-D capture with its ground truth, `cpapfit phantom`) written into
     `folder`; the folder, for `load_scan`."""
+    from .io.phantom import write_phantom
     from .synthetic.ict_phantom import make_ict_phantom
     from .synthetic.template_phantom import make_phantom
 

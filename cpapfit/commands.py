@@ -1,6 +1,7 @@
 """What each command does: read the inputs, call the stages (or `api`), write the outputs, and
 say what was done in a line or two on stderr. `cli.py` parses the arguments and imports this
-module only when a command runs.
+module only when a command runs; what only some commands use (the synthetic subjects, matplotlib) is
+imported inside them, so that `register` and `landmarks` do not wait for it.
 """
 
 import sys
@@ -16,18 +17,13 @@ from .io import load_scan
 from .io.cushion import load_cushion
 from .outputs import registration_ply
 from .io.landmarks import user_landmarks
-from .io.phantom import write_head_mesh, write_phantom, write_sweep
 from .io.summary import counts, summary_csv, summary_html
 from .io.write import json_bytes, png_bytes, record_bytes, write_bytes, write_files
 from .jobs import ScanTask, design_folder
 from .landmarks.types import Landmarks
-from .synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
-from .synthetic.ict_sweep import make_ict_sweep
-from .synthetic.template_phantom import make_phantom
 from .progress import batch_display, stage_display
 from .records import landmarks_file_record
 from .pipeline import Alignment, place_template
-from .report.pictures import template_regions_picture
 from .scan import Scan
 from .template import load_template
 
@@ -230,6 +226,10 @@ def cmd_batch(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    from .io.phantom import write_phantom
+    from .report.pictures import template_regions_picture
+    from .synthetic.template_phantom import make_phantom
+
     out = Path(args.out)
     subject = out / "subject"
     info(f"cpapfit demo: synthetic subject (seed {args.seed}) -> {subject}")
@@ -254,6 +254,11 @@ def cmd_demo(args) -> int:
 
 
 def cmd_phantom(args) -> int:
+    from .io.phantom import write_head_mesh, write_phantom, write_sweep
+    from .synthetic.ict_phantom import ict_head_mesh, make_ict_phantom
+    from .synthetic.ict_sweep import make_ict_sweep
+    from .synthetic.template_phantom import make_phantom
+
     if not 0.0 <= args.mouth_open <= 30.0:
         raise InputError(f"--mouth-open {args.mouth_open:g}: give 0-30 mm")
     if args.glasses and args.population != "template":

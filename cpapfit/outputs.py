@@ -16,7 +16,6 @@ from .fabrication.files import checked_assembly, checked_files
 from .io.write import ply_bytes, record_bytes
 from .pipeline import Design
 from .records import contact_curve_record, design_record, mask_record
-from .report.assemble import Provenance, report_files as assemble_report
 from .scan import Scan
 from .template import load_template
 from .work import at_once
@@ -85,6 +84,8 @@ def run_date() -> str:
 
 def report_files(d: Design, scan: Scan, files: dict[str, bytes], submit=at_once) -> dict[str, bytes]:
     """The pictures and report.html of a design whose files (with fit.json and mask.json) are `files`, as {name: bytes};
-    `submit`: see `assemble.report_files`."""
+    `submit`: see `assemble.report_files`. The report (and matplotlib) is imported here, where it is used."""
+    from .report.assemble import Provenance, report_files as assemble_report
+
     provenance = Provenance(scan.source, input_sha256(Path(scan.source)), run_date())
     return assemble_report(d, scan, json.loads(files["fit.json"]), json.loads(files["mask.json"]), provenance, submit)

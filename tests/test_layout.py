@@ -1,7 +1,9 @@
 """The package's layout: no import cycle between cpapfit's subpackages; the stages never import the
-synthetic subjects."""
+synthetic subjects; the commands load the report and the synthetic subjects only where they are used."""
 
 import ast
+import subprocess
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -44,3 +46,10 @@ def test_only_the_phantom_command_and_api_import_the_synthetic_subjects():
              if path.relative_to(PACKAGE).parts[0] != "synthetic" and any(t[0] == "synthetic" for t in imported(path))}
     assert users == SYNTHETIC_USERS
     assert package_imports()["synthetic"] >= {"template", "ict"}
+
+
+def test_the_commands_load_neither_the_report_nor_the_synthetic_subjects_until_used():
+    """`cpapfit register` and `landmarks` import `commands`; matplotlib and the subjects cost them ~0.6 s."""
+    code = "import sys, cpapfit.commands; print(sorted({m.split('.')[0] if m.startswith('matplotlib') else m for m in sys.modules "
+    code += "if m.startswith(('matplotlib', 'cpapfit.report', 'cpapfit.synthetic'))}))"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
