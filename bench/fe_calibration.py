@@ -46,8 +46,8 @@ from cpapfit.synthetic.ict_phantom import ict_head_mesh
 from cpapfit.io import load_scan
 from cpapfit.pipeline import design, place_template
 from cpapfit.template import MASKS
+from ict_bench import model_argument, model_source
 
-FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 SECTIONS = 16
 WALL_MM, FLANGE_MM, FLAP_MM = CushionParams().wall_mm, CushionParams().flange_mm, CushionParams().membrane_mm
 FLAP_WIDTHS_MM = (3.0, 4.0, 5.0, 6.0, 8.0, 10.0)  # narrow flaps to about the envelope's width
@@ -125,12 +125,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=6)
     ap.add_argument("--first", type=int, default=8000)
-    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped")
+    model_argument(ap)
     ap.add_argument("--membrane", action="store_true", help="the membrane's sealed opening instead")
     ap.add_argument("--widths", type=float, nargs="+", default=FLAP_WIDTHS_MM, help="the membrane's widths, mm")
     ap.add_argument("--thickness", type=float, default=FLAP_MM, help=f"the membrane's thickness, mm (the design's thinnest: {THINNEST_MM:g})")
     args = ap.parse_args()
-    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    source = model_source(args)
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}")
     t0 = time.perf_counter()
     if args.membrane:

@@ -2,6 +2,7 @@
 head mesh read as `cpapfit` reads a scan file."""
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
@@ -19,13 +20,22 @@ def ict_arguments(ap: argparse.ArgumentParser, seeds: int = 30, first: int = 800
     ap.add_argument("--first", type=int, default=first)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows", type=Path, default=None, help="also write every row here (JSON lines)")
+    model_argument(ap)
+
+
+def model_argument(ap: argparse.ArgumentParser) -> None:
+    """--model: the ICT model file the faces are drawn from, or "shipped"."""
     ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
-                    help="the ICT model file the faces are drawn from, or 'shipped' (default: ../shared's full model when present)")
+                    help=f"the ICT model file the faces are drawn from (all its identity modes), or 'shipped' (the package's 40); "
+                    f"default {FULL_MODEL} when present")
 
 
 def model_source(args: argparse.Namespace) -> Path | None:
-    """The ICT model file `--model` names (None: the shipped model)."""
-    return None if str(args.model) == "shipped" else Path(args.model).resolve()
+    """The ICT model file `--model` names (None: the shipped model), said on stderr: the default is the
+    shipped model wherever ../shared is not beside this checkout's folder."""
+    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    print(f"ICT model: {source or f'the shipped one (no {FULL_MODEL})'}", file=sys.stderr)
+    return source
 
 
 def scan_of(mesh: trimesh.Trimesh) -> Scan:

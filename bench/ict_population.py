@@ -56,11 +56,11 @@ from cpapfit.evaluation.mechanics import COS_MIN
 from cpapfit.pipeline import design, place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import MASKS, load_template
+from ict_bench import model_argument, model_source
 
 POINTS = (31, 33, 35, 36, 39, 42, 45, 48, 54)  # Multi-PIE: nose base, eye corners, mouth corners (no nose tip)
 INDEX = [MULTIPIE_TO_FACEMESH[p] for p in POINTS]  # their template vertices
 CAPILLARY_KPA = FitParams().capillary_kpa  # the awake peak's limit
-FULL_MODEL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict_face_model" / "ict_face_model.npz"
 
 
 def subject(seed: int, kind: str, source: Path | None = None):
@@ -197,11 +197,9 @@ def main() -> None:
     ap.add_argument("--kinds", nargs="+", default=["capture", "mesh"], choices=["capture", "mesh"])
     ap.add_argument("--masks", nargs="+", default=list(MASKS), choices=list(MASKS))
     ap.add_argument("--rows", type=Path, default=None, help="also write every design's row here (JSON lines)")
-    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
-                    help="the ICT model file the faces are drawn from (all its identity modes), or 'shipped' "
-                    "(the package's 40); default ../shared/data/ict_face_model/ict_face_model.npz when present")
+    model_argument(ap)
     args = ap.parse_args()
-    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    source = model_source(args)
     model = load_ict(source)
     drawn = f"{len(model.identity)} identity modes of {source}" if source else f"the shipped {len(model.identity)} identity modes"
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "

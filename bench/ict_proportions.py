@@ -23,7 +23,8 @@ from cpapfit.ict import load_ict, random_subject, template_truth
 from cpapfit.pipeline import place_template
 from cpapfit.quality.proportions import proportions
 from cpapfit.template import load_template
-from ict_population import FULL_MODEL, subject
+from ict_bench import model_argument, model_source
+from ict_population import subject
 
 PERCENTILES = (0.1, 1.0, 5.0, 50.0, 95.0, 99.0, 99.9)
 
@@ -50,9 +51,9 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=5000)
     ap.add_argument("--views", type=int, nargs="+", default=[3000, 3110, 3051])
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped")
+    model_argument(ap)
     args = ap.parse_args()
-    source = None if str(args.model) == "shipped" else Path(args.model).resolve()
+    source = model_source(args)
     print(f"cpapfit {__version__}, {platform.machine()}, Python {platform.python_version()}; ICT seeds "
           f"{args.first}-{args.first + args.seeds - 1} ({len(load_ict(source).identity)} identity modes); capture views of {args.views}")
     with ProcessPoolExecutor(args.workers) as pool:

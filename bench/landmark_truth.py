@@ -16,7 +16,8 @@ import numpy as np
 import cpapfit.landmarks.facemesh as facemesh
 from cpapfit.align.initial import initial_alignment
 from cpapfit.template import load_template
-from ict_population import FULL_MODEL, subject
+from ict_bench import FULL_MODEL
+from ict_population import subject
 from registration_starts import template_subject
 
 

@@ -22,7 +22,8 @@ from cpapfit.io.write import write_files
 from cpapfit.pipeline import align, register_template
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.template import MASKS, load_template
-from ict_population import FULL_MODEL, subject
+from ict_bench import FULL_MODEL
+from ict_population import subject
 
 BANDS = {mask: load_template().regions[mask].band for mask in MASKS}
 
