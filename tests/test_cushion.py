@@ -38,17 +38,18 @@ def test_solid_is_watertight_and_manifold_with_walls_of_the_set_thickness(design
 
 def test_the_wall_is_as_thick_as_set_everywhere_not_thicker_where_one_bend_thins_it(designed):
     """The designed cushion's surface thickened to its 2 mm wall: measured at each of its 128 x 24
-    grid points (`wall_thickness`), at least the set thickness and within 3 % over it at 95 % of
-    them, at most 20 % over anywhere: the offset grows only where a bend thins the wall."""
+    grid points (`wall_thickness`), at least the set thickness (to within rounding, REACHED), exactly
+    that at most of them and within 3 % over it at 95 %, at most 20 % over anywhere: the offset grows
+    only where a bend thins the wall, not where rounding reads a wall a last bit under its set thickness."""
     from cpapfit.cushion.contact import closed_resample
-    from cpapfit.cushion.solid import thickened
+    from cpapfit.cushion.solid import REACHED, thickened
 
     _, d = designed
     wall_mm = d.cushion.params.wall_mm
     _, walls, folds = thickened(d.cushion.grid(128, 24), np.full(128, wall_mm), closed_resample(d.contact.normals, 128))
     share = walls / wall_mm
-    assert folds == 0 and share.min() >= 1.0
-    assert np.percentile(share, 95) <= 1.03 and share.max() <= 1.2
+    assert folds == 0 and share.min() >= REACHED
+    assert abs(np.median(share) - 1.0) <= 1e-9 and np.percentile(share, 95) <= 1.03 and share.max() <= 1.2
 
 
 def test_rim_lies_on_the_scan(designed):

@@ -12,6 +12,8 @@ from .nurbs import Cushion
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
 OFFSET_PASSES = 5  # solids offset at most, each growing the offsets where the wall is thinner than set
 MAX_OFFSET = 4.0  # no offset grows past this many times its set thickness
+REACHED = 1.0 - 1e-9  # a wall this share of its set thickness has reached it: an offset along a unit normal measures
+# its set length to within rounding (1e-16), either side, and must not be grown for the side it rounds to
 
 
 def thicken(grid: np.ndarray, thickness_mm: np.ndarray, face_normals_hint: np.ndarray,
@@ -84,7 +86,7 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
     sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
     along its v=0 edge). An offset along the smoothed normals thins the wall where the sheet bends,
     so each grid point's offset grows, by 1.02 over its wall's share of its target, until its wall
-    reaches the target (OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
+    reaches the target (to within REACHED; OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
     the solid is as thick as set everywhere, not thicker where its neighbours bend; where the
     offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
     n_u, n_v, _ = grid.shape
@@ -95,9 +97,9 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
             solid = thicken(grid, offset, hint, smoothing)
             walls = wall_thickness(grid, solid.vertices[n_u * n_v:])
             share = walls.reshape(n_u, n_v) / wanted
-            if share.min() >= 1.0:
+            if share.min() >= REACHED:
                 break
-            offset = np.minimum(offset * np.where(share < 1.0, 1.02 / np.maximum(share, 0.25), 1.0), MAX_OFFSET * wanted)
+            offset = np.minimum(offset * np.where(share < REACHED, 1.02 / np.maximum(share, 0.25), 1.0), MAX_OFFSET * wanted)
         folds = self_intersecting_edges(solid)
         if folds == 0:
             break
