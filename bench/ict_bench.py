@@ -26,7 +26,7 @@ def ict_arguments(ap: argparse.ArgumentParser, seeds: int = 30, first: int = 800
 def model_argument(ap: argparse.ArgumentParser) -> None:
     """--model: the ICT model file the faces are drawn from, or "shipped"."""
     ap.add_argument("--model", default=FULL_MODEL if FULL_MODEL.is_file() else "shipped",
-                    help=f"the ICT model file the faces are drawn from (all its identity modes), or 'shipped' (the package's 40); "
+                    help="the ICT model file the faces are drawn from (all its identity modes), or 'shipped' (the package's 40); "
                     f"default {FULL_MODEL} when present")
 
 
@@ -34,7 +34,8 @@ def model_source(args: argparse.Namespace) -> Path | None:
     """The ICT model file `--model` names (None: the shipped model), said on stderr: the default is the
     shipped model wherever ../shared is not beside this checkout's folder."""
     source = None if str(args.model) == "shipped" else Path(args.model).resolve()
-    print(f"ICT model: {source or f'the shipped one (no {FULL_MODEL})'}", file=sys.stderr)
+    shipped = "the shipped one" + ("" if FULL_MODEL.is_file() else f" (no {FULL_MODEL})")
+    print(f"ICT model: {source or shipped}", file=sys.stderr)
     return source
 
 

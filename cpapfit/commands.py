@@ -1,7 +1,7 @@
 """What each command does: read the inputs, call the stages (or `api`), write the outputs, and
 say what was done in a line or two on stderr. `cli.py` parses the arguments and imports this
-module only when a command runs; what only some commands use (the synthetic subjects, matplotlib) is
-imported inside them, so that `register` and `landmarks` do not wait for it.
+module only when a command runs; what only some commands use (the synthetic subjects, the report
+and matplotlib) is imported where it is used, so that `register` and `landmarks` do not wait for it.
 """
 
 import sys

@@ -19,6 +19,7 @@ import uuid
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from functools import partial
+from importlib import import_module
 from pathlib import Path
 from typing import Callable
 
@@ -99,7 +100,9 @@ def design_job(
     """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
     files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes and some report pictures made in a second
     process (`worker`; the stock family's population, which both processes need, made first). What a
-    stage leaves is released as the next starts (`memory.release`)."""
+    stage leaves is released as the next starts (`memory.release`). The report is imported before the
+    worker is forked, so that both processes have it (and it is frozen with the rest, `memory.settled`)."""
+    import_module(".report.assemble", __package__)  # imported where used by `outputs`, which `register` never uses
     on_stage = _releasing(on_stage)
     with worker(parallel, population if stock else None) as submit:
         on_stage("reading the scan")

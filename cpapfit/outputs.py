@@ -84,8 +84,8 @@ def run_date() -> str:
 
 def report_files(d: Design, scan: Scan, files: dict[str, bytes], submit=at_once) -> dict[str, bytes]:
     """The pictures and report.html of a design whose files (with fit.json and mask.json) are `files`, as {name: bytes};
-    `submit`: see `assemble.report_files`. The report (and matplotlib) is imported here, where it is used."""
-    from .report.assemble import Provenance, report_files as assemble_report
+    `submit`: see `assemble.report_files`."""
+    from .report.assemble import Provenance, report_files as assemble_report  # with matplotlib: here, where it is used
 
     provenance = Provenance(scan.source, input_sha256(Path(scan.source)), run_date())
     return assemble_report(d, scan, json.loads(files["fit.json"]), json.loads(files["mask.json"]), provenance, submit)

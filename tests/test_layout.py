@@ -52,4 +52,5 @@ def test_the_commands_load_neither_the_report_nor_the_synthetic_subjects_until_u
     """`cpapfit register` and `landmarks` import `commands`; matplotlib and the subjects cost them ~0.6 s."""
     code = "import sys, cpapfit.commands; print(sorted({m.split('.')[0] if m.startswith('matplotlib') else m for m in sys.modules "
     code += "if m.startswith(('matplotlib', 'cpapfit.report', 'cpapfit.synthetic'))}))"
-    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "[]"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0 and run.stdout.strip() == "[]", run.stdout + run.stderr

@@ -12,8 +12,7 @@ from .nurbs import Cushion
 NORMAL_SMOOTHING = (3.0, 6.0)  # Gaussian widths over the sheet's normals before offsetting, in grid steps, tried in turn
 OFFSET_PASSES = 5  # solids offset at most, each growing the offsets where the wall is thinner than set
 MAX_OFFSET = 4.0  # no offset grows past this many times its set thickness
-REACHED = 1.0 - 1e-9  # a wall this share of its set thickness has reached it: an offset along a unit normal measures
-# its set length to within rounding (1e-16), either side, and must not be grown for the side it rounds to
+REACHED = 1.0 - 1e-9  # a wall this share of its set thickness has reached it (an offset measures its length to ~1e-13)
 
 
 def thicken(grid: np.ndarray, thickness_mm: np.ndarray, face_normals_hint: np.ndarray,
@@ -86,7 +85,8 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
     sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
     along its v=0 edge). An offset along the smoothed normals thins the wall where the sheet bends,
     so each grid point's offset grows, by 1.02 over its wall's share of its target, until its wall
-    reaches the target (to within REACHED; OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
+    reaches the target (a share of REACHED: an offset along a unit normal measures its set length
+    only to within rounding, either side, and is not grown for the side it rounds to; OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
     the solid is as thick as set everywhere, not thicker where its neighbours bend; where the
     offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
     n_u, n_v, _ = grid.shape

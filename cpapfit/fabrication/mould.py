@@ -99,8 +99,9 @@ def _outer_parts(outer: m3.Manifold, filled: trimesh.Trimesh, frame: np.ndarray,
     parting = between(filled, frame, lo, hi)
     left_side = to_manifold(parting.solid(hi[0] + AWAY_MM))
     left, right = rest ^ left_side, rest - left_side
-    for y in (lo[1] + MARGIN_MM / 2, hi[1] - MARGIN_MM / 2):  # in the mould wall's corners, clear of the plug
-        at = parting.point(y, lo[2] + MARGIN_MM / 2)
+    near = MARGIN_MM / 2 + GRID_MM / 4  # a quarter step off the midpoint of two parting grid lines, where a last bit picks one
+    for y in (lo[1] + near, hi[1] - MARGIN_MM / 2):  # in the mould wall's corners, clear of the plug
+        at = parting.point(y, lo[2] + near)
         left = left + m3.Manifold.sphere(KEY_MM, 32).translate(at)
         right = right - m3.Manifold.sphere(KEY_MM + KEY_CLEARANCE_MM, 32).translate(at)
     return _joined_pieces({"mould_left": left, "mould_right": right, "mould_face": outer - above})
