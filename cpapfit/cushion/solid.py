@@ -85,10 +85,11 @@ def thickened(grid: np.ndarray, target: np.ndarray, hint: np.ndarray) -> tuple[t
     sheet thickened to `target` (n_u,) mm along u away from the face (`hint`: (n_u, 3) skin normals
     along its v=0 edge). An offset along the smoothed normals thins the wall where the sheet bends,
     so each grid point's offset grows, by 1.02 over its wall's share of its target, until its wall
-    reaches the target (a share of REACHED: an offset along a unit normal measures its set length
-    only to within rounding, either side, and is not grown for the side it rounds to; OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
+    reaches the target (OFFSET_PASSES solids at most; no offset over MAX_OFFSET times its target):
     the solid is as thick as set everywhere, not thicker where its neighbours bend; where the
-    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING)."""
+    offset folds into itself, the offset directions are smoothed more (NORMAL_SMOOTHING). A share
+    of REACHED counts as reached: an offset along a unit normal measures its set length only to
+    within rounding, either side, and is not grown for the side it rounds to."""
     n_u, n_v, _ = grid.shape
     wanted = np.repeat(target, n_v).reshape(n_u, n_v)
     for smoothing in NORMAL_SMOOTHING:
