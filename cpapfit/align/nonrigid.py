@@ -45,7 +45,8 @@ same weight, so the system matrix (w I + mu L + lambda S) is the same for x, y a
 not change between iterations at one stiffness: it is factorised once per stiffness level (a
 handful of times, reusing the symbolic analysis) and each iteration is three back-substitutions.
 The mirror term is solved in the plane's frame, where it adds one matrix across the plane and
-another along it: two factorisations per level instead of one.
+another along it: two factorisations per level instead of one. The two starts' runs build the same
+matrices and share their factorisations (`align/system.py`).
 """
 
 from concurrent.futures import ThreadPoolExecutor
@@ -53,8 +54,7 @@ from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
-import qdldl
-from scipy.sparse import csr_matrix, diags
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from ..clustering import median_edge
@@ -67,6 +67,7 @@ from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
 from .morphable import MorphableParams, ShapeBasis, fit_shape
 from .symmetry import MirrorTerm, mirror_term, plane_of_pairs, symmetry_plane
+from .system import ElasticSystem, SharedFactors
 
 # A registration's vertices are kept to 10^-GRID_DECIMALS mm (a micrometre; its residuals measured on
 # the unrounded ones) and its morphable share to SHARE_DECIMALS decimals: the last bits of its solves
@@ -195,7 +196,7 @@ def register(
     first = _weighed(runs, product, faces, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        again = [(setup, _register(aligned, faces, setup, (lm_index, lm_target), 1.0, params)) for setup, _ in runs]
+        again = _elastic_runs(aligned, faces, [lambda setup=setup: setup for setup, _ in runs], (lm_index, lm_target), 1.0, params)
         first = _weighed(again, product, faces, params)
     return replace(first, landmark_spread_mm=spread)
 
@@ -271,7 +272,7 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
     """The elastic ICP (its set-up and result) from the affine start and, given a shape basis, from the
     morphable one (`morphable.fit_shape`, begun at the similarity: the affine start, fitted to a face
     unlike the template's, slid 2-3 mm along ICT subjects' skin), each start's chain in a thread of
-    its own (the factorisations, solves and k-d tree queries release the GIL)."""
+    its own."""
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
@@ -283,13 +284,27 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
                                         (params.point_to_point, params.point_to_plane),
                                         (params.max_distance_mm, params.max_normal_deg), params.morphable))
 
-    def run(start_of) -> tuple[_Setup, Registration]:
-        start = start_of()
-        setup = _Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
-        return setup, _register(aligned, faces, setup, landmarks, factor, params)
 
-    with ThreadPoolExecutor(max_workers=len(starts)) as pool:
-        return list(pool.map(run, starts))
+    def setup_of(start_of) -> _Setup:
+        start = start_of()
+        return _Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
+
+    return _elastic_runs(aligned, faces, [lambda start_of=start_of: setup_of(start_of) for start_of in starts], landmarks, factor, params)
+
+
+def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmarks: tuple, factor: float,
+                  params: NonrigidParams) -> list[tuple[_Setup, Registration]]:
+    """The elastic ICP (its set-up and result) of each of `setups` (callables making a `_Setup`), each in a
+    thread of its own, the runs sharing their factorisations (the factorisations, solves and k-d tree
+    queries release the GIL)."""
+    factors = SharedFactors(len(setups))
+
+    def run(number: int) -> tuple[_Setup, Registration]:
+        setup = setups[number]()
+        return setup, _register(aligned, faces, setup, landmarks, factor, params, (factors, number))
+
+    with ThreadPoolExecutor(max_workers=len(setups)) as pool:
+        return list(pool.map(run, range(len(setups))))
 
 
 def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: NonrigidParams) -> MirrorTerm:
@@ -299,15 +314,19 @@ def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: 
     return mirror_term(mirror, plane)
 
 
-def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams) -> Registration:
-    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's weight."""
+def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams,
+              shared: tuple[SharedFactors, int]) -> Registration:
+    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's
+    weight; shared: (the factorisations shared with runs of the same system, this run's number)."""
     vf, target, lap, start, mirror = setup
     lm_index, lm_target = landmarks
     selector = np.zeros(len(aligned))
     selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
     mu, lam = params.membrane, params.landmark * factor
-    system = _System(w_data, lap, selector, mirror, params.symmetry / params.membrane, mu, lam)
+    factors, run = shared
+    system = ElasticSystem(w_data, lap, selector, mirror, params.symmetry / params.membrane, factors, run)
+    system.at(0, mu, lam)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
@@ -328,7 +347,8 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
                 break
             relaxed, at_level = relaxed + 1, 0
             mu, lam = mu * params.relax_factor, lam * params.relax_factor
-            system.refactor(mu, lam)
+            system.at(relaxed, mu, lam)
+    factors.finished(run)
     final = start + disp
     return Registration(np.round(final, GRID_DECIMALS), log=tuple(log), landmark_factor=factor, bending=float(np.sum((lap @ disp) ** 2)),
                         **_measured(final, faces, target, vf, params))
@@ -367,46 +387,6 @@ def _landmark_targets(landmarks: Landmarks | None, params: NonrigidParams):
         return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
     keep = landmarks.confidence >= params.min_landmark_confidence
     return landmarks.template_index[keep], landmarks.points[keep]
-
-
-class _System:
-    """(w I + mu L + lam S + k mu M) X = B for (n, 3) right-hand sides, M the mirror term (if any), k its
-    weight per unit of membrane: sparse LDL^T factorisations (QDLDL) whose symbolic analysis is kept
-    when mu and lam change (the sparsity pattern does not). Without a mirror term one matrix serves
-    x, y and z; with one, the system is solved in the plane's frame, one matrix across it, one along."""
-
-    def __init__(self, w_data: float, lap, selector: np.ndarray, mirror: MirrorTerm | None, k: float, mu: float, lam: float):
-        self.w_data, self.lap, self.selector, self.mirror, self.k = w_data, lap, selector, mirror, k
-        self.solvers = [qdldl.Solver(m) for m in self._matrices(mu, lam)]
-
-    def refactor(self, mu: float, lam: float) -> None:
-        """The same system at membrane weight mu and landmark weight lam (numeric factorisation only)."""
-        for solver, m in zip(self.solvers, self._matrices(mu, lam)):
-            solver.update(m)
-
-    def _matrices(self, mu: float, lam: float) -> list:
-        """The CSC matrices at (mu, lam): one, or across and along the plane; sets the mirror weight k mu."""
-        base = diags(self.w_data + lam * self.selector) + mu * self.lap
-        self.weight = self.k * mu
-        matrices = [base] if self.mirror is None else [base + self.weight * self.mirror.across, base + self.weight * self.mirror.along]
-        return [m.tocsc() for m in matrices]
-
-    def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
-        """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`: x, y and z
-        solved side by side (QDLDL releases the GIL; each column is independent)."""
-        if self.mirror is None:
-            return self._columns(rhs, [self.solvers[0]] * 3)
-        m, w = self.mirror, self.weight
-        r, s = rhs @ m.frame.T, start @ m.frame.T  # in the plane's frame
-        r[:, 0] -= w * (m.across @ s[:, 0] - m.across_rhs)
-        r[:, 1:] -= w * (m.along @ s[:, 1:])
-        return self._columns(r, [self.solvers[0], self.solvers[1], self.solvers[1]]) @ m.frame
-
-    @staticmethod
-    def _columns(rhs: np.ndarray, solvers: list) -> np.ndarray:
-        columns = [np.ascontiguousarray(rhs[:, k]) for k in range(3)]
-        with ThreadPoolExecutor(max_workers=3) as pool:
-            return np.column_stack(list(pool.map(lambda sc: sc[0].solve(sc[1]), zip(solvers, columns))))
 
 
 def _data_targets(current: np.ndarray, m, target: Target, params: NonrigidParams) -> np.ndarray:
