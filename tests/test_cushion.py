@@ -77,15 +77,16 @@ def test_adult_dimensions_and_256_control_points(designed):
 
 
 @pytest.mark.slow
-def test_design_command_writes_the_files(cli, phantom1_dir, tmp_path):
-    """... in place of an earlier design in the folder (its files that this one does not write are gone)."""
+def test_design_command_writes_the_files(cli, phantom1_dir, placed1, tmp_path):
+    """... in place of an earlier design in the folder (its files that this one does not write are gone);
+    the template placed as for seed 1's nasal design (a placement serves both masks)."""
     out = tmp_path / "out"
     out.mkdir()
     (out / "manifest.json").write_text(json.dumps({"files": ["cushion.stl", "cushion_v1.stl"]}))
     (out / "cushion_v1.stl").write_text("an earlier design's file")
     code, _, err = cli("design", phantom1_dir, "--mask", "oronasal", "--stock", "gauge", "--verbose", "--out", out)
     assert code == 0, err
-    assert "non-rigid registration:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
+    assert "solid and checks:" in err and "\x1b" not in err  # stage times; no spinner off a terminal
     manifest = written(out / "manifest.json")
     names = {p.name for p in out.iterdir()} - {"manifest.json"}
     assert set(manifest["files"]) == names and manifest["parameters"]["mask"] == "oronasal"
