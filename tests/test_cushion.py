@@ -278,7 +278,7 @@ def test_seal_points_land_on_the_skin_under_a_cheap_cameras_depth_steps():
     assert error.mean() <= 0.45 and error.max() <= 1.2
 
 
-def test_a_cheap_camera_far_away_still_gives_a_cushion_on_the_skin(tmp_path):
+def test_a_cheap_camera_far_away_still_gives_a_seal_on_the_skin(tmp_path):
     """Subject 2 one metre from a Kinect v1 (`phantom.KINECT_V1`): the seal lies within 0.5 mm of
     the true skin at the median and 2 mm at most (following the depth steps, it lay 0.67 and 2.7 mm
     off; on other such subjects it crossed itself and the design was refused): the seal carried over

@@ -284,7 +284,6 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
                                         (params.point_to_point, params.point_to_plane),
                                         (params.max_distance_mm, params.max_normal_deg), params.morphable))
 
-
     def setup_of(start_of) -> _Setup:
         start = start_of()
         return _Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
@@ -300,8 +299,11 @@ def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmark
     factors = SharedFactors(len(setups))
 
     def run(number: int) -> tuple[_Setup, Registration]:
-        setup = setups[number]()
-        return setup, _register(aligned, faces, setup, landmarks, factor, params, (factors, number))
+        try:
+            setup = setups[number]()
+            return setup, _register(aligned, faces, setup, landmarks, factor, params, (factors, number))
+        finally:
+            factors.finished(number)
 
     with ThreadPoolExecutor(max_workers=len(setups)) as pool:
         return list(pool.map(run, range(len(setups))))
@@ -324,9 +326,7 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
     selector[lm_index] = 1.0
     w_data = params.point_to_point + params.point_to_plane
     mu, lam = params.membrane, params.landmark * factor
-    factors, run = shared
-    system = ElasticSystem(w_data, lap, selector, mirror, params.symmetry / params.membrane, factors, run)
-    system.at(0, mu, lam)
+    system = ElasticSystem(w_data, lap, selector, mirror, params.symmetry / params.membrane, shared, mu, lam)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
@@ -348,7 +348,6 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
             relaxed, at_level = relaxed + 1, 0
             mu, lam = mu * params.relax_factor, lam * params.relax_factor
             system.at(relaxed, mu, lam)
-    factors.finished(run)
     final = start + disp
     return Registration(np.round(final, GRID_DECIMALS), log=tuple(log), landmark_factor=factor, bending=float(np.sum((lap @ disp) ** 2)),
                         **_measured(final, faces, target, vf, params))
