@@ -83,10 +83,10 @@ def _factorised(matrices: list, spare: list | None) -> list:
 
 class ElasticSystem:
     """(w I + mu L + lam S + k mu M) X = B for (n, 3) right-hand sides, M the mirror term (if any), k its
-    weight per unit of membrane, at the stiffness level set by `at` (level 0 at mu, lam to begin;
-    shared: the factorisations shared with the other run and this run's number). Without a mirror term one matrix
-    serves x, y and z; with one, the system is solved in the plane's frame, one matrix across it,
-    one along."""
+    weight per unit of membrane, at the stiffness level set by `at` (level 0 at mu, lam to begin).
+    shared: the factorisations shared with the other run, and this run's number. Without a mirror
+    term one matrix serves x, y and z; with one, the system is solved in the plane's frame, one
+    matrix across it, one along."""
 
     def __init__(self, w_data: float, lap, selector: np.ndarray, mirror: MirrorTerm | None, k: float, shared: tuple[SharedFactors, int],
                  mu: float, lam: float):
