@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from matplotlib import colormaps
 from PIL import Image
 
 from cpapfit.align.morphable import MorphableParams
@@ -16,7 +17,8 @@ from cpapfit.outputs import design_files, input_sha256, run_date
 from cpapfit.report.advice import Notice, at_seal_force, fit_notices, gate_notices, landmark_notices, scan_notices
 from cpapfit.report.assemble import Provenance, evaluated_rims, pressure_scale, report_files
 from cpapfit.report.frame import Face, seal_view, shoot, to_pixels
-from cpapfit.report.pictures import OPEN_RGB, rim_image
+from cpapfit.report.figure import PANEL, ColourScale, panels_png
+from cpapfit.report.pictures import OPEN, OPEN_RGB, rim_image
 from cpapfit.loops import longest_run, loop_lengths
 from cpapfit.template import load_template
 
@@ -45,11 +47,11 @@ def report(designed1, tmp_path_factory):
     return folder, files, fit, mask
 
 
-EXPECTED_SIZES = {  # (width, height) px: panels of 640 x 480 with titles, colour bars, legends
-    "scan_landmarks.png": (780, 570), "registration_residual.png": (780, 570), "contact_curve.png": (1300, 605),
-    "cushion_on_face.png": (1300, 570), "mask_on_face.png": (1300, 570), "rim_gap.png": (1420, 605), "rim_gap_profile.png": (900, 420),
-    "rim_pressure.png": (1420, 605), "rim_pressure_profile.png": (900, 420), "leak.png": (1300, 605),
-    "states_pressure.png": (2700, 1125),
+EXPECTED_SIZES = {  # (width, height) px: panels of 640 x 480 at their own pixels, with titles, colour bars, legends
+    "scan_landmarks.png": (820, 570), "registration_residual.png": (820, 570), "contact_curve.png": (1315, 595),
+    "cushion_on_face.png": (1315, 570), "mask_on_face.png": (1315, 570), "rim_gap.png": (1475, 595), "rim_gap_profile.png": (900, 420),
+    "rim_pressure.png": (1475, 595), "rim_pressure_profile.png": (900, 420), "leak.png": (1315, 595),
+    "states_pressure.png": (2785, 1110),
 }
 
 
@@ -259,3 +261,17 @@ def test_the_other_starts_contact_band_is_recorded_and_told(designed1, report):
     assert record["start"] == "affine" and record["morphable_share"] == pytest.approx(share, abs=1e-4) and share < 0.5
     assert 0.05 < apart < 3.0 and record["other_start_band_mm"] == pytest.approx(apart, abs=1e-3)
     assert f"fitted from the morphable start alone put the contact band {apart:.1f} mm (mean) from this one" in files["report.html"].decode()
+
+
+def test_pictures_are_laid_out_at_their_own_pixels_beside_their_colour_bar():
+    """Each picture of a panel lands in the PNG pixel for pixel (no resampling), in rows of `columns`."""
+    pictures = [np.random.default_rng(seed).integers(0, 256, (48, 64, 3), dtype=np.uint8) for seed in range(3)]
+    scale = ColourScale(colormaps["viridis"], 0.0, 1.0, "a value (mm)", ((0.5, "half"),))
+    out = np.asarray(Image.open(io.BytesIO(panels_png(pictures, ["a", "b", "c"], "three", scale, ((OPEN, "open"),), columns=2))).convert("RGB"))
+    width = PANEL.pad + 2 * 64 + PANEL.gap + sum(PANEL.bar)
+    assert out.shape == (PANEL.heading + 2 * (PANEL.title + 48) + PANEL.legend, width, 3)
+    for i, picture in enumerate(pictures):
+        top, left = PANEL.heading + (i // 2) * (PANEL.title + 48) + PANEL.title, PANEL.pad + (i % 2) * (64 + PANEL.gap)
+        assert np.array_equal(out[top:top + 48, left:left + 64], picture), i
+    bar = out[PANEL.heading + PANEL.title + 5:-PANEL.legend - 5, width - PANEL.bar[2] - PANEL.bar[1] // 2]
+    assert len(np.unique(bar, axis=0)) > 20  # the colour bar's gradient, beside the pictures

@@ -41,6 +41,29 @@ def zoned_cmap(lo_frac: float, hi_frac: float) -> Colormap:
     return LinearSegmentedColormap("zoned", data)
 
 
+@dataclass(frozen=True)
+class Panels:
+    """The layout of side-by-side pictures, in pixels: the margin, the gap between pictures, the
+    heading's, each title's and the legend's bands, and beside a colour bar the room for its marks'
+    names, the bar and its ticks and label."""
+
+    pad: int = 10
+    gap: int = 15
+    heading: int = 45
+    title: int = 35
+    legend: int = 35
+    bar: tuple = (80, 15, 75)
+
+
+PANEL = Panels()
+
+
+def sized_figure(width: int, height: int) -> Figure:
+    """A figure of exactly width x height pixels at DPI (Agg truncates its size to whole pixels, so
+    the size asked for is half a pixel more)."""
+    return Figure(figsize=((width + 0.5) / DPI, (height + 0.5) / DPI), dpi=DPI)
+
+
 def png(fig: Figure) -> bytes:
     """PNG bytes of a figure (no timestamp or software metadata: same figure, same bytes)."""
     buf = io.BytesIO()
@@ -48,9 +71,9 @@ def png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def colour_bar(fig: Figure, ax, scale: ColourScale) -> None:
-    """A labelled colour bar beside `ax` (an Axes or a list of them), with the scale's marks drawn across it."""
-    bar = fig.colorbar(ScalarMappable(Normalize(scale.lo, scale.hi), scale.cmap), ax=ax, fraction=0.035, pad=0.02)
+def colour_bar(fig: Figure, cax, scale: ColourScale) -> None:
+    """A labelled colour bar drawn in the Axes `cax`, with the scale's marks drawn across it and named to its left."""
+    bar = fig.colorbar(ScalarMappable(Normalize(scale.lo, scale.hi), scale.cmap), cax=cax)
     bar.set_label(scale.label, fontsize=FONT)
     bar.ax.tick_params(labelsize=FONT - 1)
     for value, text in scale.marks:
@@ -61,24 +84,25 @@ def colour_bar(fig: Figure, ax, scale: ColourScale) -> None:
 
 def panels_png(images: list[np.ndarray], titles: list[str], heading: str, scale: ColourScale | None = None,
                legend: tuple = (), columns: int | None = None) -> bytes:
-    """PNG of pictures side by side (in rows of `columns`, default all in one row) with their titles,
-    a heading, an optional colour bar and a legend [(colour, label)] of line marks."""
+    """PNG of (H, W, 3) uint8 pictures, all of one size, side by side (in rows of `columns`, default all
+    in one row) at one figure pixel per picture pixel, with their titles, a heading, an optional colour
+    bar and a legend [(colour, label)] of line marks, laid out by `PANEL`."""
     h, w = images[0].shape[:2]
     columns = columns or len(images)
     rows = -(-len(images) // columns)
-    width = columns * w / DPI + (1.4 if scale else 0.2)
-    fig = Figure(figsize=(width, rows * (h / DPI + 0.4) + 0.5 + (0.35 if legend else 0.0)), dpi=DPI, layout="constrained")
-    axes = np.atleast_1d(fig.subplots(rows, columns)).ravel()
-    for ax in axes[len(images):]:
-        ax.set_axis_off()
-    for ax, image, title in zip(axes, images, titles):
-        ax.imshow(image, interpolation="nearest")
-        ax.set_axis_off()
-        ax.set_title(title, fontsize=FONT)
-    fig.suptitle(heading, fontsize=FONT + 2, fontweight="bold")
+    right = PANEL.pad + columns * w + (columns - 1) * PANEL.gap
+    band = rows * (PANEL.title + h)
+    width, height = right + (sum(PANEL.bar) if scale else PANEL.pad), PANEL.heading + band + (PANEL.legend if legend else PANEL.pad)
+    fig = sized_figure(width, height)
+    fig.text(0.5, 1 - PANEL.heading / 2 / height, heading, ha="center", va="center", fontsize=FONT + 2, fontweight="bold")
+    for i, (image, title) in enumerate(zip(images, titles)):
+        left, top = PANEL.pad + (i % columns) * (w + PANEL.gap), height - PANEL.heading - (i // columns) * (PANEL.title + h)
+        fig.figimage(image, xo=left, yo=top - PANEL.title - h, origin="upper")
+        fig.text((left + w / 2) / width, (top - PANEL.title / 2) / height, title, ha="center", va="center", fontsize=FONT)
     if scale:
-        colour_bar(fig, list(axes), scale)
+        bottom = height - PANEL.heading - band
+        colour_bar(fig, fig.add_axes(((right + PANEL.bar[0]) / width, bottom / height, PANEL.bar[1] / width, (band - PANEL.title) / height)), scale)
     if legend:
         handles = [Line2D([], [], color=c, linewidth=5, label=label) for c, label in legend]
-        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=FONT - 1, frameon=False)
+        fig.legend(handles=handles, loc="lower center", ncols=len(handles), fontsize=FONT - 1, frameon=False)
     return png(fig)

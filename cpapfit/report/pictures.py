@@ -6,7 +6,6 @@ return the (H, W, 3) uint8 picture itself."""
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.figure import Figure
 
 from ..similarity import Similarity
 from ..landmarks.types import Landmarks
@@ -14,7 +13,7 @@ from ..render import Scene, raycast, scene_of, shade
 from ..scan import Intrinsics
 from ..template import TEMPLATE_TO_CAMERA, Template
 from .draw import draw_dots, draw_loop
-from .figure import FONT, ColourScale, panels_png, png
+from .figure import FONT, ColourScale, panels_png, png, sized_figure
 from .frame import Face, Shot, around_seal, face_view, place_name, shoot, to_pixels, whole_face_view
 from ..loops import loop_lengths
 from .rim import KPA_TO_MMHG
@@ -31,6 +30,8 @@ SEALED, OPEN = "#1a9850", "#d73027"
 OPEN_RGB = np.array([20, 20, 20], dtype=np.uint8)
 NO_DATA_RGB = np.array([150, 150, 150], dtype=np.uint8)
 COMPARED_STYLE = {"color": "#e08214", "linestyle": "--"}
+PROFILE_PX = (900, 420)  # a profile's size
+PROFILE_MARGINS = {"left": 80 / 900, "right": 1 - 80 / 900, "bottom": 75 / 420, "top": 1 - 40 / 420}  # room for labels and title
 LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "stock": COMPARED_STYLE, "generic": COMPARED_STYLE,
                "stock_gauge": {"color": "#7b3294", "linestyle": ":"}}
 
@@ -154,8 +155,8 @@ def profile_picture(similarity: Similarity, mask: str, rims: dict, ylabel: str, 
     """PNG: values along each rim of {name: (points (K, 3) mm, values (K,), open (K,) bool or None)}
     against the position around the seal, custom vs stock (or generic); a window (lo, hi) kPa shaded; open
     stretches marked; a mmHg axis beside kPa if `mmhg`."""
-    fig = Figure(figsize=(9.0, 4.2), dpi=100, layout="constrained")
-    ax = fig.subplots()
+    fig = sized_figure(*PROFILE_PX)
+    ax = fig.subplots(gridspec_kw=PROFILE_MARGINS)
     if window:
         ax.axhspan(*window, color="#a1d99b", alpha=0.45, label=f"safe window {window[0]:.1f}-{window[1]:.1f} kPa")
     for name, (points, values, open_) in rims.items():
