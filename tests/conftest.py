@@ -59,12 +59,14 @@ def nasal1(phantom1_dir):
 
 @pytest.fixture
 def placed1(nasal1, monkeypatch):
-    """`pipeline.place_template` answering with seed 1's placement (`nasal1`'s), for tests of the stages after it."""
-    from cpapfit import commands, pipeline  # commands imported first: its own names stay the real ones
+    """`place_template` answering with seed 1's placement (`nasal1`'s) in the design's stages and in
+    `api.evaluate`, for tests of the stages after it (the `register` and `landmarks` commands place it themselves)."""
+    from cpapfit import api, commands, pipeline  # commands imported first: its own names stay the real ones
 
-    assert commands.place_template is pipeline.place_template
+    assert commands.place_template is pipeline.place_template is api.place_template
     placement = pipeline.Placement(nasal1.design.alignment, nasal1.design.registration, None)
-    monkeypatch.setattr(pipeline, "place_template", lambda *args, **kwargs: placement)
+    for module in (pipeline, api):
+        monkeypatch.setattr(module, "place_template", lambda *args, **kwargs: placement)
     return placement
 
 
