@@ -72,6 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "design":
             p.add_argument("--mask", default="nasal", choices=["nasal", "oronasal"])
             p.add_argument("--stock", default="best", help=STOCK_HELP)
+        if name in ("design", "register"):
             add_progress_options(p)
         if name == "evaluate":
             p.add_argument("--cushion", required=True, help="cushion.stl")

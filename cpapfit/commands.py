@@ -90,8 +90,10 @@ def _weights(reg) -> str:
 
 
 def cmd_register(args) -> int:
-    scan = load_scan(Path(args.scan), args.units)
-    placed = place_template(scan, user_landmarks(args.landmarks, scan))
+    with stage_display(args.quiet, args.verbose) as on_stage:
+        on_stage("reading the scan")
+        scan = load_scan(Path(args.scan), args.units)
+        placed = place_template(scan, user_landmarks(args.landmarks, scan), on_stage)
     al, reg = placed.alignment, placed.registration
     write_bytes(Path(args.out), registration_ply(reg))
     info(f"{scan.units_note}; {found_by(al.landmarks)}; {registration_summary(reg)} -> {args.out}")

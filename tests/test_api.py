@@ -1,5 +1,6 @@
 """The public API: the README's five-line Python design, its files against the shipped schemas."""
 
+import json
 import subprocess
 import sys
 
@@ -69,6 +70,33 @@ def test_the_registration_parameters_in_params_reach_the_registration(phantom1_d
     with pytest.raises(Registering) as raised:
         cpapfit.design(cpapfit.load_scan(phantom1_dir), params=cpapfit.Params(registration=mine), report=False)
     assert raised.value.args[0] is mine
+
+
+def test_evaluate_places_the_template_with_the_landmarks_and_settings_it_is_given(phantom1_dir, tmp_path, monkeypatch):
+    """`evaluate` places the template itself (the design's placement is not reused): with the user's
+    landmarks read in the scan's units and the registration, quality and landmark-noise settings of
+    its `Params`."""
+    import cpapfit
+    from cpapfit import api
+
+    class Placing(Exception):
+        pass
+
+    def place_template(scan, landmarks, **settings):
+        raise Placing(scan, landmarks, settings)
+
+    monkeypatch.setattr(api, "place_template", place_template)
+    scan = cpapfit.load_scan(phantom1_dir)
+    index = [1, 4, 33, 263]
+    (tmp_path / "lm.json").write_text(json.dumps({"points": scan.vertices[:4].tolist(), "template_index": index}))
+    params = cpapfit.Params(registration=cpapfit.NonrigidParams(user_trust_mm=1.0), quality=cpapfit.QualityParams(residual_flag_mm=0.9),
+                            landmark_noise=cpapfit.LandmarkNoise(sigma_mm=1.5, seed=3))
+    with pytest.raises(Placing) as raised:
+        cpapfit.evaluate(scan, trimesh.creation.icosphere(), landmarks=tmp_path / "lm.json", params=params)
+    placed_on, landmarks, settings = raised.value.args
+    assert placed_on is scan and landmarks.path == "user" and landmarks.template_index.tolist() == index
+    assert np.array_equal(landmarks.points, scan.vertices[:4])
+    assert settings == {"params": params.registration, "quality": params.quality, "landmark_noise": params.landmark_noise}
 
 
 def test_the_landmark_noise_in_params_reaches_the_detected_landmarks(nasal1, phantom1_dir, monkeypatch):

@@ -174,8 +174,10 @@ def read_ply_attributes(path):
 
 
 def test_register_command_writes_the_warped_template(cli, phantom1_dir, tmp_path):
-    code, _, err = cli("register", phantom1_dir, "--out", tmp_path / "reg.ply")
+    code, _, err = cli("register", phantom1_dir, "--out", tmp_path / "reg.ply", "--verbose")
     assert code == 0, err
+    times = {line.split(":")[0].strip(): float(line.split(":")[1].split()[0]) for line in err.splitlines() if line.endswith(" s")}
+    assert times.keys() >= {"landmarks and similarity", "non-rigid registration"} and all(t > 0 for t in times.values()), err
     mesh, residual, valid = read_ply_attributes(tmp_path / "reg.ply")
     assert len(mesh.vertices) == len(TEMPLATE.vertices) and np.array_equal(mesh.faces, TEMPLATE.faces)
     assert valid.mean() > 0.5 and np.median(residual[valid == 1]) < 0.3

@@ -22,7 +22,7 @@ from cpapfit.cli import main
 from cpapfit.io import load_scan
 from cpapfit.io.landmarks import user_landmarks
 from cpapfit.pipeline import Placement, assessed, place_template
-from cpapfit.outputs import design_files, report_files
+from cpapfit.outputs import report_files
 from cpapfit.jobs import worker
 from cpapfit.work import at_once
 from cpapfit.io.capture import capture_files
@@ -293,12 +293,12 @@ def test_longest_hole_wraps_around_the_seal():
 
 def test_pictures_drawn_in_a_worker_process_are_the_same_bytes(nasal1, monkeypatch):
     """The report drawn with its design pictures in a second process (as `cpapfit design` does) is
-    the report drawn in one (`nasal1`'s; a spawned worker: this test process already runs other threads)."""
+    the report `nasal1` drew in one, every picture and the page (a spawned worker: this test process
+    already runs other threads). The evaluation's pictures and the page are drawn here a second time."""
     monkeypatch.setenv("SOURCE_DATE_EPOCH", DATE_EPOCH)  # the run date, to the minute, is on the page
-    d, scan = nasal1.design, nasal1.scan
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        drawn = report_files(d, scan, design_files(d, scan), pool.submit)
-    assert drawn == {name: nasal1.files[name] for name in drawn}
+        drawn = report_files(nasal1.design, nasal1.scan, nasal1.files, pool.submit)
+    assert drawn == {name: data for name, data in nasal1.files.items() if name.endswith(".png") or name == "report.html"}
 
 
 def test_no_worker_is_forked_from_a_process_running_threads():

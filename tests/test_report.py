@@ -1,4 +1,4 @@
-"""The report: pictures, warnings, report.html in headless Chromium offline, determinism.
+"""The report: pictures and their layout, warnings, report.html in headless Chromium offline.
 
 One design of the synthetic subject of seed 1, with its evaluation, is shared by all tests."""
 
@@ -256,14 +256,20 @@ def test_the_other_starts_contact_band_is_recorded_and_told(designed1, report):
 
 
 def test_pictures_are_laid_out_at_their_own_pixels_beside_their_colour_bar():
-    """Each picture of a panel lands in the PNG pixel for pixel (no resampling), in rows of `columns`."""
-    pictures = [np.random.default_rng(seed).integers(0, 256, (48, 64, 3), dtype=np.uint8) for seed in range(3)]
+    """Each picture of a panel lands in the PNG pixel for pixel (no resampling), in rows of `columns`;
+    the colour bar spans the pictures' rows from the first's top to the last's bottom; the legend lies
+    below the last row."""
+    h, w = 48, 64
+    pictures = [np.random.default_rng(seed).integers(0, 256, (h, w, 3), dtype=np.uint8) for seed in range(4)]
     scale = ColourScale(colormaps["viridis"], 0.0, 1.0, "a value (mm)", ((0.5, "half"),))
-    out = np.asarray(Image.open(io.BytesIO(panels_png(pictures, ["a", "b", "c"], "three", scale, ((OPEN, "open"),), columns=2))).convert("RGB"))
-    width = PANEL.pad + 2 * 64 + PANEL.gap + sum(PANEL.bar)
-    assert out.shape == (PANEL.heading + 2 * (PANEL.title + 48) + PANEL.legend, width, 3)
+    out = np.asarray(Image.open(io.BytesIO(panels_png(pictures, list("abcd"), "four", scale, ((OPEN, "open"),), columns=2))).convert("RGB"))
+    width, top = PANEL.pad + 2 * w + PANEL.gap + sum(PANEL.bar), PANEL.heading + PANEL.title
+    assert out.shape == (PANEL.heading + 2 * (PANEL.title + h) + PANEL.legend, width, 3)
     for i, picture in enumerate(pictures):
-        top, left = PANEL.heading + (i // 2) * (PANEL.title + 48) + PANEL.title, PANEL.pad + (i % 2) * (64 + PANEL.gap)
-        assert np.array_equal(out[top:top + 48, left:left + 64], picture), i
-    bar = out[PANEL.heading + PANEL.title + 5:-PANEL.legend - 5, width - PANEL.bar[2] - PANEL.bar[1] // 2]
-    assert len(np.unique(bar, axis=0)) > 20  # the colour bar's gradient, beside the pictures
+        row, left = top + (i // 2) * (PANEL.title + h), PANEL.pad + (i % 2) * (w + PANEL.gap)
+        assert np.array_equal(out[row:row + h, left:left + w], picture), i
+    bottom = top + 2 * h + PANEL.title
+    bar = (out[:, width - PANEL.bar[2] - PANEL.bar[1] // 2] < 235).any(axis=1)  # its middle column: coloured or outlined
+    assert bar[top:bottom].all() and not bar[:top - 1].any() and not bar[bottom + 1:].any()
+    assert len(np.unique(out[top + 2:bottom - 2, width - PANEL.bar[2] - PANEL.bar[1] // 2], axis=0)) > 20  # a gradient
+    assert (out[bottom:] < 235).any(axis=2).sum() > 50  # the legend's mark and words, under the pictures

@@ -30,8 +30,8 @@ SEALED, OPEN = "#1a9850", "#d73027"
 OPEN_RGB = np.array([20, 20, 20], dtype=np.uint8)
 NO_DATA_RGB = np.array([150, 150, 150], dtype=np.uint8)
 COMPARED_STYLE = {"color": "#e08214", "linestyle": "--"}
-PROFILE_PX = (900, 420)  # a profile's size
-PROFILE_MARGINS = {"left": 80 / 900, "right": 1 - 80 / 900, "bottom": 75 / 420, "top": 1 - 40 / 420}  # room for labels and title
+PROFILE_PX = (900, 420)  # a profile's (width, height) px
+PROFILE_MARGINS_PX = {"left": 80, "right": 80, "bottom": 75, "top": 40}  # room for the axes' labels and the title
 LINE_STYLES = {"custom": {"color": "#1f4e9c", "linestyle": "-"}, "stock": COMPARED_STYLE, "generic": COMPARED_STYLE,
                "stock_gauge": {"color": "#7b3294", "linestyle": ":"}}
 
@@ -156,7 +156,8 @@ def profile_picture(similarity: Similarity, mask: str, rims: dict, ylabel: str, 
     against the position around the seal, custom vs stock (or generic); a window (lo, hi) kPa shaded; open
     stretches marked; a mmHg axis beside kPa if `mmhg`."""
     fig = sized_figure(*PROFILE_PX)
-    ax = fig.subplots(gridspec_kw=PROFILE_MARGINS)
+    (w, h), m = PROFILE_PX, PROFILE_MARGINS_PX
+    ax = fig.subplots(gridspec_kw={"left": m["left"] / w, "right": 1 - m["right"] / w, "bottom": m["bottom"] / h, "top": 1 - m["top"] / h})
     if window:
         ax.axhspan(*window, color="#a1d99b", alpha=0.45, label=f"safe window {window[0]:.1f}-{window[1]:.1f} kPa")
     for name, (points, values, open_) in rims.items():
