@@ -144,9 +144,9 @@ def _other_start(reg: Registration, mask: str) -> str:
     return f" The template fitted from the {minor} start alone put the contact band {apart:.1f} mm (mean) from this one." + weighed
 
 
-def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, frame: Face, face: Face, whole, close,
+def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion: Face, face: Face, whole, close,
                     scene: Scene) -> list[Picture]:
-    """The scan understood: landmarks, registration residual, contact curve, cushion and assembled mask on the face
+    """The scan understood: landmarks, registration residual, contact curve and the cushion on the face
     (`scene`: the face's, `render.scene_of`)."""
     sim = al.similarity
     res = reg.residual[reg.valid]
@@ -167,18 +167,22 @@ def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion:
         Picture("cushion_on_face.png", "The custom cushion on the face",
                 "The printable cushion (blue) as designed on the scan.",
                 pic.cushion_picture(face, cushion.vertices, cushion.faces, sim, scene)),
-        Picture("mask_on_face.png", "The assembled mask on the face",
-                "The cushion (blue) in its frame (white): the frame carries the 22 mm connector for the hose, the exhaust vents "
-                "on its upper side, the four headgear strap slots and, on an oronasal mask, the anti-asphyxia valve's opening "
-                "below the connector. The table above gives the mask's figures.",
-                pic.mask_picture(face, cushion, frame, sim, scene)),
     ]
+
+
+def mask_picture(sim, cushion: Face, frame: Face, face: Face, scene: Scene) -> Picture:
+    """The assembled mask on the face (`scene`: the face's, `render.scene_of`)."""
+    return Picture("mask_on_face.png", "The assembled mask on the face",
+                   "The cushion (blue) in its frame (white): the frame carries the 22 mm connector for the hose, the exhaust vents "
+                   "on its upper side, the four headgear strap slots and, on an oronasal mask, the anti-asphyxia valve's opening "
+                   "below the connector. The table above gives the mask's figures.",
+                   pic.mask_picture(face, cushion, frame, sim, scene))
 
 
 def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance: Provenance, submit=at_once) -> dict[str, bytes]:
     """The pictures and report.html of a design (`fit` its fit.json record, `mask_record` its mask.json),
     as {name: bytes}. `submit(fn, *args)` (a process pool's, or `at_once`) draws the design's own
-    pictures while this process draws the evaluation's."""
+    pictures (`design_pictures`) while this process draws the assembled mask and the evaluation's."""
     sim, mask = d.alignment.similarity, d.contact.mask
     rims, window_kpa = evaluated_rims(d), d.fit_params.window_kpa
     face = scan_face(scan, d)
@@ -189,9 +193,10 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     close = shoot(Face(face.vertices, face.faces), seal_view(sim, np.vstack([d.contact.curve, *(r.points for r in rims.values())])), scene)
     cushion = Face(d.solid.vertices, d.solid.faces)
     frame = Face(d.frame.mesh.vertices, d.frame.mesh.faces)
-    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, frame, face, whole, close, scene)
+    early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close, scene)
     scale = pressure_scale(rims, window_kpa)
-    later = gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
+    later = [mask_picture(sim, cushion, frame, face, scene)]  # drawn here: the worker checks the solids' files first
+    later += gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     later.append(state_picture(close, d, scale))
     values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}
     fig = viewer_figure(shown, cushion,
