@@ -53,6 +53,12 @@ def stamps(out, names):
     return {n: ((st := os.stat(out / n / "manifest.json")).st_ino, st.st_mtime_ns) for n in names}
 
 
+def thread_cluster() -> LocalCluster:
+    """A running scheduler with one worker thread in this process (no worker process to start, the
+    stages' caches warm): the batches run on it after the first."""
+    return LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
+
+
 def hidden(out):
     return sorted(p.name for p in out.iterdir() if p.name.startswith("."))
 
@@ -93,7 +99,7 @@ def test_batch_on_a_local_cluster_with_a_bad_file_then_rerun_on_a_running_schedu
 
     before = stamps(out, ["p1", "p2"])
     (inp / "bad.ply").write_bytes(b"")  # still bad, differently: a retry gives the new error
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with thread_cluster() as cluster:
         code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address, "--stock", "none")
     assert code == 1, err
     rows = summary(out)
@@ -128,7 +134,8 @@ def test_a_killed_rerun_leaves_the_earlier_design_and_the_next_redoes_only_what_
     assert written(out / "p2" / "manifest.json") == earlier and all((out / "p2" / f).is_file() for f in earlier["files"])
     before = stamps(out, ["p1"])
 
-    code, _, err = cli("batch", inp, "--out", out, "--workers", 1, "--stock", "none")
+    with thread_cluster() as cluster:
+        code, _, err = cli("batch", inp, "--out", out, "--scheduler", cluster.scheduler_address, "--stock", "none")
     assert code == 0, err
     rows = summary(out)
     assert rows["p1"]["status"] == "unchanged" and rows["p2"]["status"] == "designed"
