@@ -54,9 +54,10 @@ def stamps(out, names):
 
 
 def thread_cluster() -> LocalCluster:
-    """A running scheduler with one worker thread in this process (no worker process to start, the
-    stages' caches warm): the batches run on it after the first."""
-    return LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
+    """A running scheduler on TCP, as a user's is, with one worker thread in this process (no worker
+    process to start, the stages' caches warm; no memory limit, which would read this whole process):
+    the batches run on it after the first."""
+    return LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://", memory_limit=0, dashboard_address=None)
 
 
 def hidden(out):

@@ -294,7 +294,8 @@ def test_longest_hole_wraps_around_the_seal():
 def test_pictures_drawn_in_a_worker_process_are_the_same_bytes(nasal1, monkeypatch):
     """The report drawn with its design pictures in a second process (as `cpapfit design` does) is
     the report `nasal1` drew in one, every picture and the page (a spawned worker: this test process
-    already runs other threads). The evaluation's pictures and the page are drawn here a second time."""
+    already runs other threads). The assembled mask's and the evaluation's pictures and the page are
+    drawn here a second time."""
     monkeypatch.setenv("SOURCE_DATE_EPOCH", DATE_EPOCH)  # the run date, to the minute, is on the page
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
         drawn = report_files(nasal1.design, nasal1.scan, nasal1.files, pool.submit)

@@ -2,7 +2,8 @@
 scan, the fit.json and mask.json records and, once evaluated, each cushion's rim pressure.
 
 Pure: the caller (cpapfit/outputs.py) supplies what comes from outside (input hash, date) and,
-optionally, a worker process (`work.py`) that draws the design's own pictures meanwhile."""
+optionally, a worker process (`work.py`) that draws four of the design's pictures meanwhile
+(`design_pictures`)."""
 
 from dataclasses import dataclass
 
@@ -17,6 +18,7 @@ from ..memory import release
 from ..pipeline import Alignment, Design
 from ..render import Scene, scene_of
 from ..scan import Scan
+from ..similarity import Similarity
 from ..template import load_template
 from ..work import at_once
 from . import pictures as pic
@@ -170,8 +172,8 @@ def design_pictures(al: Alignment, reg: Registration, contact: Contact, cushion:
     ]
 
 
-def mask_picture(sim, cushion: Face, frame: Face, face: Face, scene: Scene) -> Picture:
-    """The assembled mask on the face (`scene`: the face's, `render.scene_of`)."""
+def mask_picture(face: Face, cushion: Face, frame: Face, sim: Similarity, scene: Scene) -> Picture:
+    """The assembled mask, the `cushion` in its `frame` (mm, scan frame), on the face (`scene`: the face's, `render.scene_of`)."""
     return Picture("mask_on_face.png", "The assembled mask on the face",
                    "The cushion (blue) in its frame (white): the frame carries the 22 mm connector for the hose, the exhaust vents "
                    "on its upper side, the four headgear strap slots and, on an oronasal mask, the anti-asphyxia valve's opening "
@@ -195,7 +197,7 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     frame = Face(d.frame.mesh.vertices, d.frame.mesh.faces)
     early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close, scene)
     scale = pressure_scale(rims, window_kpa)
-    later = [mask_picture(sim, cushion, frame, face, scene)]  # drawn here: the worker checks the solids' files first
+    later = [mask_picture(face, cushion, frame, sim, scene)]  # drawn here: the worker checks the solids' files first
     later += gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
     later.append(state_picture(close, d, scale))
     values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}

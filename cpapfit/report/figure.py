@@ -100,8 +100,9 @@ def panels_png(images: list[np.ndarray], titles: list[str], heading: str, scale:
         fig.figimage(image, xo=left, yo=top - PANEL.title - h, origin="upper")
         fig.text((left + w / 2) / width, (top - PANEL.title / 2) / height, title, ha="center", va="center", fontsize=FONT)
     if scale:
-        bottom = height - PANEL.heading - band
-        colour_bar(fig, fig.add_axes(((right + PANEL.bar[0]) / width, bottom / height, PANEL.bar[1] / width, (band - PANEL.title) / height)), scale)
+        bottom = height - PANEL.heading - band  # the last row's pictures' bottom edge; the bar runs up to the first's top
+        rect = ((right + PANEL.bar[0]) / width, bottom / height, PANEL.bar[1] / width, (band - PANEL.title) / height)
+        colour_bar(fig, fig.add_axes(rect), scale)
     if legend:
         handles = [Line2D([], [], color=c, linewidth=5, label=label) for c, label in legend]
         fig.legend(handles=handles, loc="lower center", ncols=len(handles), fontsize=FONT - 1, frameon=False)
