@@ -510,22 +510,28 @@ def test_a_head_and_shoulders_mesh_in_mm_is_read_and_its_face_found(tmp_path, ph
     assert np.linalg.norm(registered[REGION] - truth[REGION], axis=1).mean() <= 1.0
 
 
-def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, nasal1, monkeypatch):
+def test_detected_landmarks_far_from_the_registered_face_are_dropped(phantom1, phantom1_dir, nasal1, monkeypatch, cli, tmp_path):
     """Detected landmarks lifted 15 mm to the side of their places (a colour image shifted from its
     depth): the registered face lies a median > 10 mm from them, so the template is placed by the face's
-    shape alone and registered within 1 mm of the truth; landmarks where they belong are kept (seed 1's
+    shape alone and registered within 1 mm of the truth, and the landmarks command, which writes the
+    landmarks a design uses, writes none of them; landmarks where they belong are kept (seed 1's
     nasal design's)."""
     from dataclasses import replace
 
     from cpapfit import pipeline
-    from cpapfit.pipeline import registered
 
     scan, al, reg = nasal1.scan, nasal1.design.alignment, nasal1.design.registration
     assert al.landmarks.path == "image" and reg.landmark_spread_mm < 5.0
     side = al.similarity.rotation[:, 0]
     moved = scan.vertices[cKDTree(scan.vertices).query(al.landmarks.points + 15.0 * side)[1]]
     stray = replace(al, landmarks=replace(al.landmarks, points=moved))
-    instead, reg, _ = registered(scan, stray)
+    made, registered = [], pipeline.registered
+    monkeypatch.setattr(pipeline, "align", lambda *args: stray)  # seed 1's detection, shifted
+    monkeypatch.setattr(pipeline, "registered", lambda *args: made.append(registered(*args)) or made[-1])
+    code, _, err = cli("landmarks", phantom1_dir, "--out", tmp_path / "lm.json")
+    record = written(tmp_path / "lm.json", "landmarks")
+    assert code == 0 and record["path"] == "fallback" and "from their places on the registered face" in record["rejected"], err
+    (instead, reg, _), = made
     assert instead.landmarks.path == "fallback" and "mm from their places on the registered face" in instead.landmarks.rejected
     assert np.linalg.norm(reg.vertices[REGION] - phantom1.surface[REGION], axis=1).mean() <= 1.0
     monkeypatch.setattr(pipeline, "landmark_free_alignment", lambda *args: None)  # the shape alone is no face
@@ -580,25 +586,6 @@ def test_landmarks_that_drag_the_template_off_the_face_are_dropped_for_the_shape
     assert np.linalg.norm(placed.registration.vertices[band] - truth[band], axis=1).mean() < 1.7
     (gate,) = [g for g in assessed(scan, "oronasal", placed).quality.flags if g.code == "landmark_free"]
     assert "shape alone" in gate.message
-
-
-def test_the_landmarks_command_writes_the_landmarks_a_design_uses(phantom1_dir, tmp_path, monkeypatch, cli):
-    """Detected landmarks the registration drops (15 mm to the side, as above) are not written either."""
-    from dataclasses import replace
-
-    from cpapfit import pipeline
-
-    align = pipeline.align
-
-    def stray(scan, *args):
-        al = align(scan, *args)
-        moved = scan.vertices[cKDTree(scan.vertices).query(al.landmarks.points + 15.0 * al.similarity.rotation[:, 0])[1]]
-        return replace(al, landmarks=replace(al.landmarks, points=moved))
-
-    monkeypatch.setattr(pipeline, "align", stray)
-    code, _, err = cli("landmarks", phantom1_dir, "--out", tmp_path / "lm.json")
-    record = written(tmp_path / "lm.json", "landmarks")
-    assert code == 0 and record["path"] == "fallback" and "from their places on the registered face" in record["rejected"], err
 
 
 def test_a_face_found_from_the_fallbacks_pose_must_be_that_faces_size(tmp_path, monkeypatch):
