@@ -197,9 +197,9 @@ def report_files(d: Design, scan: Scan, fit: dict, mask_record: dict, provenance
     frame = Face(d.frame.mesh.vertices, d.frame.mesh.faces)
     early = submit(design_pictures, d.alignment, d.registration, d.contact, cushion, face, whole, close, scene)
     scale = pressure_scale(rims, window_kpa)
-    later = [mask_picture(face, cushion, frame, sim, scene)]  # drawn here: the worker checks the solids' files first
-    later += gap_pictures(close, sim, mask, rims, fit) + pressure_pictures(close, sim, mask, rims, window_kpa, fit)
-    later.append(state_picture(close, d, scale))
+    later = [mask_picture(face, cushion, frame, sim, scene),  # drawn here: the worker checks the solids' files first
+             *gap_pictures(close, sim, mask, rims, fit), *pressure_pictures(close, sim, mask, rims, window_kpa, fit),
+             state_picture(close, d, scale)]
     values = {n: np.asarray(r.pressure_kpa, dtype=float) for n, r in rims.items()}
     fig = viewer_figure(shown, cushion,
                         {n: (r.points, values[n]) for n, r in rims.items()}, scale, sim, d.cushion.axis)
