@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from cpapfit.align.symmetry import Plane, mirror_term, plane_of_pairs, symmetry_plane
+from cpapfit.align.symmetry import Plane, mirror_pairs, mirror_term, plane_of_pairs, symmetry_plane
 from cpapfit.rims import boundary_vertices
 from cpapfit.template import load_template
 
@@ -61,7 +61,7 @@ def test_mirror_term_is_the_sum_of_squared_mirror_gaps():
     """u^T across u - 2 u . across_rhs + 4 c^2 (pairs) + v^T along v over both in-plane coordinates
     equals sum over pairs |reflect(p_i) - p_j|^2, for any points; zero for a symmetric face."""
     plane = truth()
-    term = mirror_term(TEMPLATE.mirror, plane)
+    term = mirror_term(mirror_pairs(TEMPLATE.mirror), plane)
     pairs = np.arange(len(TEMPLATE.mirror)) <= TEMPLATE.mirror
 
     def energy(p: np.ndarray) -> float:

@@ -1,28 +1,32 @@
-"""The elastic ICP's shared factorisations: each level factorised once for runs in step, the same bits
-as a run's own, a run that falls behind still solving the system of its own level, and a run never
-solving a system made with other weights."""
+"""The elastic ICP's shared factorisations: the first level factorised before any run asks, each level
+factorised once for runs in step, the same bits as a run's own, a run that falls behind still
+solving the system of its own level, and a failing factorisation failing every run."""
 
 import threading
+from types import SimpleNamespace
 
 import numpy as np
-import pytest
-import qdldl
 from scipy.sparse import diags, random as sparse_random
 
+import qdldl
 from cpapfit.align import system
-from cpapfit.align.system import SharedFactors
+from cpapfit.align.system import SharedFactors, Stiffness
 
-LEVELS = 4
+LEVELS = 5
 WAIT_S = 60.0  # a thread stuck this long has deadlocked
 
 
-def matrices(level: int) -> list:
-    """Two SPD CSC matrices of one pattern (across, along), softer each level."""
+def stiffness() -> Stiffness:
+    """A 300-vertex system with a mirror term: two SPD CSC matrices of one pattern a level, softer each level."""
     rng = np.random.default_rng(0)
     a = sparse_random(300, 300, density=0.02, random_state=rng)
     lap = (a + a.T) + diags(np.ones(300))
-    lap = lap.T @ lap
-    return [(diags(np.full(300, 1.1)) + 0.5 ** level * scale * lap).tocsc() for scale in (100.0, 50.0)]
+    lap = (lap.T @ lap).tocsr()
+    selector = (rng.random(300) < 0.1).astype(float)
+    return Stiffness(1.1, lap, selector, (0.5 * lap, 0.25 * lap), 0.01, 100.0, 1.0, 0.5)
+
+
+STIFFNESS = stiffness()
 
 
 def counted(monkeypatch) -> list:
@@ -38,7 +42,7 @@ def walk(factors: SharedFactors, run: int, rhs: np.ndarray, barrier: threading.B
     for level in range(LEVELS):
         if barrier is not None:
             barrier.wait()
-        out.append([s.solve(rhs) for s in factors.solvers(run, level, (0.5 ** level,), lambda: matrices(level))])
+        out.append([s.solve(rhs) for s in factors.solvers(run, level)])
     factors.finished(run)
     return out
 
@@ -57,46 +61,62 @@ def in_threads(*jobs) -> list:
 
 def own(level: int, rhs: np.ndarray) -> list:
     """The solutions of a run factorising its own matrices."""
-    return [qdldl.Solver(m).solve(rhs) for m in matrices(level)]
+    return [qdldl.Solver(m).solve(rhs) for m in STIFFNESS.matrices(level)]
+
+
+def test_level_matrices_carry_the_level_weights():
+    """Level k's matrices are w I + lam_k S + mu_k L + k mu_k M, across and along, mu and lam halved a level."""
+    s = STIFFNESS
+    assert s.weights(3) == (100.0 / 8, 1.0 / 8)
+    across, along = s.matrices(3)
+    base = diags(1.1 + s.selector / 8) + 12.5 * s.lap
+    assert abs(across - (base + 0.01 * 12.5 * 0.5 * s.lap)).max() < 1e-12
+    assert abs(along - (base + 0.01 * 12.5 * 0.25 * s.lap)).max() < 1e-12
+
+
+def test_the_first_level_is_factorised_before_any_run_asks(monkeypatch):
+    made = counted(monkeypatch)
+    with SharedFactors(2, STIFFNESS) as factors:
+        first = factors.levels[0].result(WAIT_S)
+        assert made == [True] and list(factors.levels) == [0]
+        rhs = np.ones(300)
+        assert all(np.array_equal(s.solve(rhs), o) for s, o in zip(first, own(0, rhs)))
 
 
 def test_runs_in_step_share_each_level_and_get_the_same_bits(monkeypatch):
-    """Two runs that reach each level together: each level factorised once (the first two new, the
-    others refactorised from a level both have left), every solution the bits of a run's own."""
+    """Two runs that reach each level together: each level factorised once (the first new, at most one
+    more, the others refactorised from a level left), every solution the bits of a run's own."""
     made = counted(monkeypatch)
-    factors, rhs = SharedFactors(2), [np.random.default_rng(k).normal(size=300) for k in range(2)]
+    rhs = [np.random.default_rng(k).normal(size=300) for k in range(2)]
     barrier = threading.Barrier(2, timeout=WAIT_S)
-    results = in_threads(*[lambda k=k: walk(factors, k, rhs[k], barrier) for k in range(2)])
-    assert made == [True, True] + [False] * (LEVELS - 2) and factors.factorised == LEVELS
+    with SharedFactors(2, STIFFNESS) as factors:
+        results = in_threads(*[lambda k=k: walk(factors, k, rhs[k], barrier) for k in range(2)])
+    assert factors.factorised == LEVELS and len(made) == LEVELS
+    assert made[0] and sum(made) <= 2
     for k in range(2):
         for level in range(LEVELS):
             assert all(np.array_equal(a, b) for a, b in zip(results[k][level], own(level, rhs[k])))
     assert factors.levels == {}
 
 
-def test_a_run_far_behind_solves_its_own_levels(monkeypatch):
+def test_a_run_far_behind_solves_its_own_levels():
     """One run walks every level before the other starts: the other finds the first level (where it
-    stood) and the last (where the first run stopped) kept, and factorises those between itself."""
-    made = counted(monkeypatch)
-    factors, rhs = SharedFactors(2), np.ones(300)
-    first, second = walk(factors, 0, rhs), walk(factors, 1, rhs)
-    assert made == [True, True] + [False] * (LEVELS - 2) + [False] * (LEVELS - 2)
+    stood) and the last (where the first run stopped) kept, and factorises those between again."""
+    rhs = np.ones(300)
+    with SharedFactors(2, STIFFNESS) as factors:
+        first, second = walk(factors, 0, rhs), walk(factors, 1, rhs)
+    assert factors.factorised == 2 * LEVELS - 2
     for level in range(LEVELS):
         assert all(np.array_equal(a, b) for a, b in zip(first[level], own(level, rhs)))
         assert all(np.array_equal(a, b) for a, b in zip(second[level], own(level, rhs)))
     assert factors.levels == {}
 
 
-def test_a_level_asked_for_with_other_weights_or_failing_to_factorise_is_an_error():
-    """A run asking for a level factorised with other weights is refused, not handed another system;
-    a factorisation that fails fails both runs, neither left waiting."""
-    factors = SharedFactors(2)
-    factors.solvers(0, 0, (1.0,), lambda: matrices(0))
-    with pytest.raises(ValueError, match="factorised with"):
-        factors.solvers(1, 0, (2.0,), lambda: matrices(0))
-    failing, go = SharedFactors(2), threading.Event()
+def test_a_failing_factorisation_fails_every_run():
+    """A factorisation that fails fails both runs, neither left waiting."""
+    go = threading.Event()
 
-    def broken():
+    def broken(level: int):
         go.wait(WAIT_S)
         raise np.linalg.LinAlgError("not quasi-definite")
 
@@ -104,8 +124,9 @@ def test_a_level_asked_for_with_other_weights_or_failing_to_factorise_is_an_erro
         if run == 1:
             go.set()
         try:
-            failing.solvers(run, 0, (1.0,), broken)
+            failing.solvers(run, 0)
         except np.linalg.LinAlgError as error:
             return str(error)
 
-    assert in_threads(lambda: ask(0), lambda: ask(1)) == ["not quasi-definite"] * 2
+    with SharedFactors(2, SimpleNamespace(matrices=broken)) as failing:
+        assert in_threads(lambda: ask(0), lambda: ask(1)) == ["not quasi-definite"] * 2

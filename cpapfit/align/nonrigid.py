@@ -46,7 +46,8 @@ not change between iterations at one stiffness: it is factorised once per stiffn
 handful of times, reusing the symbolic analysis) and each iteration is three back-substitutions.
 The mirror term is solved in the plane's frame, where it adds one matrix across the plane and
 another along it: two factorisations per level instead of one. The two starts' runs build the same
-matrices and share their factorisations (`align/system.py`).
+matrices and share their factorisations; the matrices are the template's and the levels' weights,
+so a thread of their own factorises the first level while the starts are made (`align/system.py`).
 """
 
 from concurrent.futures import ThreadPoolExecutor
@@ -66,8 +67,8 @@ from .affine import AffineParams, apply_affine, fit_affine, starts_from
 from .correspondences import Target, make_target, match, oriented
 from .laplacian import laplacian
 from .morphable import MorphableParams, ShapeBasis, fit_shape
-from .symmetry import MirrorTerm, mirror_term, plane_of_pairs, symmetry_plane
-from .system import ElasticSystem, SharedFactors
+from .symmetry import MirrorPairs, MirrorTerm, mirror_pairs, mirror_term, plane_of_pairs, symmetry_plane
+from .system import ElasticSystem, SharedFactors, Stiffness
 
 # A registration's vertices are kept to 10^-GRID_DECIMALS mm (a micrometre; its residuals measured on
 # the unrounded ones) and its morphable share to SHARE_DECIMALS decimals: the last bits of its solves
@@ -196,7 +197,10 @@ def register(
     first = _weighed(runs, product, faces, params)
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
-        again = _elastic_runs(aligned, faces, [lambda setup=setup: setup for setup, _ in runs], (lm_index, lm_target), 1.0, params)
+        setup = runs[0][0]
+        mirrored = None if setup.mirror is None else (setup.mirror.across, setup.mirror.along)
+        with SharedFactors(len(runs), _stiffness(setup.lap, mirrored, lm_index, 1.0, params)) as factors:
+            again = _elastic_runs(aligned, faces, [lambda setup=setup: setup for setup, _ in runs], (lm_index, lm_target), 1.0, params, factors)
         first = _weighed(again, product, faces, params)
     return replace(first, landmark_spread_mm=spread)
 
@@ -272,31 +276,45 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
     """The elastic ICP (its set-up and result) from the affine start and, given a shape basis, from the
     morphable one (`morphable.fit_shape`, begun at the similarity: the affine start, fitted to a face
     unlike the template's, slid 2-3 mm along ICT subjects' skin), each start's chain in a thread of
-    its own."""
+    its own; the system's first level is factorised meanwhile (`SharedFactors`)."""
     use_grid = params.correspondence == "grid" or (params.correspondence == "auto" and scan.is_capture)
     vf = incidence(len(aligned), faces)
     normals = vertex_normals(aligned, faces, vf)
-    target = oriented(make_target(scan, use_grid, median_edge(aligned, faces)), aligned, normals)
     lap = laplacian(aligned, faces)
-    starts = [lambda: _affine_start(aligned, normals, target, landmarks, params)]
-    if basis is not None and params.morphable is not None:
-        starts.append(lambda: fit_shape(aligned, basis, target, lambda v: vertex_normals(v, faces, vf),
-                                        (params.point_to_point, params.point_to_plane),
-                                        (params.max_distance_mm, params.max_normal_deg), params.morphable))
+    pairs = None if mirror is None or params.symmetry == 0 else mirror_pairs(mirror)
+    morphable = basis is not None and params.morphable is not None
+    stiffness = _stiffness(lap, None if pairs is None else (pairs.across, pairs.along), landmarks[0], factor, params)
+    with SharedFactors(1 + morphable, stiffness) as factors:
+        target = oriented(make_target(scan, use_grid, median_edge(aligned, faces)), aligned, normals)
+        starts = [lambda: _affine_start(aligned, normals, target, landmarks, params)]
+        if morphable:
+            starts.append(lambda: fit_shape(aligned, basis, target, lambda v: vertex_normals(v, faces, vf),
+                                            (params.point_to_point, params.point_to_plane),
+                                            (params.max_distance_mm, params.max_normal_deg), params.morphable))
 
-    def setup_of(start_of) -> _Setup:
-        start = start_of()
-        return _Setup(vf, target, lap, start, None if mirror is None or params.symmetry == 0 else _mirror_term(start, target, mirror, params))
+        def setup_of(start_of) -> _Setup:
+            start = start_of()
+            return _Setup(vf, target, lap, start, None if pairs is None else _mirror_term(start, target, pairs, params))
 
-    return _elastic_runs(aligned, faces, [lambda start_of=start_of: setup_of(start_of) for start_of in starts], landmarks, factor, params)
+        setups = [lambda start_of=start_of: setup_of(start_of) for start_of in starts]
+        return _elastic_runs(aligned, faces, setups, landmarks, factor, params, factors)
+
+
+def _stiffness(lap: csr_matrix, mirror: tuple | None, lm_index: np.ndarray, factor: float, params: NonrigidParams) -> Stiffness:
+    """The system's matrices at each level: the (n, n) membrane Laplacian `lap`, the mirror pairs'
+    (across, along) matrices (None: no mirror term), the landmarks at template indices `lm_index`
+    pulled at `factor` of the paper's weight."""
+    selector = np.zeros(lap.shape[0])
+    selector[lm_index] = 1.0
+    return Stiffness(params.point_to_point + params.point_to_plane, lap, selector, mirror, params.symmetry / params.membrane,
+                     params.membrane, params.landmark * factor, params.relax_factor)
 
 
 def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmarks: tuple, factor: float,
-                  params: NonrigidParams) -> list[tuple[_Setup, Registration]]:
+                  params: NonrigidParams, factors: SharedFactors) -> list[tuple[_Setup, Registration]]:
     """The elastic ICP (its set-up and result) of each of `setups` (callables making a `_Setup`), each in a
-    thread of its own, the runs sharing their factorisations (the factorisations, solves and k-d tree
-    queries release the GIL)."""
-    factors = SharedFactors(len(setups))
+    thread of its own, the runs solving with the `factors` made for them (the factorisations, solves and
+    k-d tree queries release the GIL)."""
 
     def run(number: int) -> tuple[_Setup, Registration]:
         try:
@@ -309,11 +327,11 @@ def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmark
         return list(pool.map(run, range(len(setups))))
 
 
-def _mirror_term(start: np.ndarray, target: Target, mirror: np.ndarray, params: NonrigidParams) -> MirrorTerm:
-    """The mirror term about the scan's plane of symmetry, found from the (n, 3) start's."""
+def _mirror_term(start: np.ndarray, target: Target, pairs: MirrorPairs, params: NonrigidParams) -> MirrorTerm:
+    """The mirror pairs' term about the scan's plane of symmetry, found from the (n, 3) start's."""
     near = np.isfinite(cKDTree(start).query(target.vertices, distance_upper_bound=params.symmetry_near_mm, workers=-1)[0])
-    plane = symmetry_plane(target.vertices[near], target.normals[near], target.boundary[near], plane_of_pairs(start, mirror))
-    return mirror_term(mirror, plane)
+    plane = symmetry_plane(target.vertices[near], target.normals[near], target.boundary[near], plane_of_pairs(start, pairs.mirror))
+    return mirror_term(pairs, plane)
 
 
 def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams,
@@ -322,11 +340,9 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
     weight; shared: (the factorisations shared with runs of the same system, this run's number)."""
     vf, target, lap, start, mirror = setup
     lm_index, lm_target = landmarks
-    selector = np.zeros(len(aligned))
-    selector[lm_index] = 1.0
-    w_data = params.point_to_point + params.point_to_plane
-    mu, lam = params.membrane, params.landmark * factor
-    system = ElasticSystem(w_data, lap, selector, mirror, params.symmetry / params.membrane, shared, mu, lam)
+    stiffness = shared[0].stiffness
+    mu, lam = stiffness.weights(0)
+    system = ElasticSystem(mirror, shared)
     disp = np.zeros_like(aligned)
     log = []
     relaxed, at_level = 0, 0
@@ -335,7 +351,7 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
         current = start + disp
         m = match(target, current, vertex_normals(current, faces, vf), *_gates(params, mu))
         pull = _data_targets(current, m, target, params)
-        rhs = w_data * (pull - start)
+        rhs = stiffness.w_data * (pull - start)
         rhs[lm_index] += lam * (lm_target - start[lm_index])
         new = system.solve(rhs, start)
         change = float(np.linalg.norm(new - disp) / max(np.linalg.norm(start + new - aligned), 1e-12))
@@ -346,8 +362,8 @@ def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: 
             if relaxed == params.relaxations:
                 break
             relaxed, at_level = relaxed + 1, 0
-            mu, lam = mu * params.relax_factor, lam * params.relax_factor
-            system.at(relaxed, mu, lam)
+            mu, lam = stiffness.weights(relaxed)
+            system.at(relaxed)
     final = start + disp
     return Registration(np.round(final, GRID_DECIMALS), log=tuple(log), landmark_factor=factor, bending=float(np.sum((lap @ disp) ** 2)),
                         **_measured(final, faces, target, vf, params))

@@ -98,9 +98,20 @@ def _in_plane(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(normal, e1)
 
 
-def mirror_term(mirror: np.ndarray, plane: Plane) -> MirrorTerm:
-    """The mirror term of the (n,) mirror pairs about `plane`: each pair once, a vertex on the
-    midline (its own pair) held on the plane."""
+class MirrorPairs(NamedTuple):
+    """The template's mirror pairs: mirror (n,) each vertex's pair, and as matrices over the n vertices
+    plus (P, n) the sum of each pair's coordinates (each pair once), across = plus^T plus and along
+    (n, n) the squared differences summed (`MirrorTerm`)."""
+
+    mirror: np.ndarray
+    plus: csr_matrix
+    across: csr_matrix
+    along: csr_matrix
+
+
+def mirror_pairs(mirror: np.ndarray) -> MirrorPairs:
+    """The matrices of the (n,) mirror pairs: each pair once, a vertex on the midline (its own pair)
+    held on the plane."""
     i = np.flatnonzero(np.arange(len(mirror)) <= mirror)
     j = mirror[i]
     rows = np.arange(len(i))
@@ -109,5 +120,10 @@ def mirror_term(mirror: np.ndarray, plane: Plane) -> MirrorTerm:
     pair = i != j
     minus = coo_matrix((np.r_[np.ones(pair.sum()), -np.ones(pair.sum())], (np.r_[rows[pair], rows[pair]], np.r_[i[pair], j[pair]])),
                        shape=shape).tocsr()  # v_i - v_j
+    return MirrorPairs(mirror, plus, (plus.T @ plus).tocsr(), (minus.T @ minus).tocsr())
+
+
+def mirror_term(pairs: MirrorPairs, plane: Plane) -> MirrorTerm:
+    """The mirror term of the template's mirror pairs about `plane`."""
     frame = np.vstack([plane.normal, *_in_plane(plane.normal)])
-    return MirrorTerm(frame, (plus.T @ plus).tocsr(), plus.T @ np.full(len(i), 2.0 * plane.offset), (minus.T @ minus).tocsr())
+    return MirrorTerm(frame, pairs.across, pairs.plus.T @ np.full(pairs.plus.shape[0], 2.0 * plane.offset), pairs.along)

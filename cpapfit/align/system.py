@@ -1,58 +1,86 @@
-"""The elastic ICP's linear system and its factorisations, shared by the runs that build the same ones.
+"""The elastic ICP's linear system at each stiffness level, factorised ahead of the runs that solve it.
 
 At membrane weight mu and landmark weight lam the system (w I + mu L + lam S + k mu M) X = B does not
 change between iterations (`align/nonrigid.py`): it is factorised once per stiffness level (QDLDL's
-sparse LDL^T). The two starts' runs of one registration build the same matrices at each level (the
-membrane, the landmarks and the mirror pairs are the template's; only the right-hand sides differ),
-so a level the other run has factorised and not yet left is solved with that factorisation, to the
-same bits.
+sparse LDL^T). Its matrices are the template's (the membrane, the landmarks it pulls, the mirror
+pairs) and the level's weights, known before the scan is looked at: a thread of their own factorises
+the first level while the scan is made a target and the runs' starts are fitted, and each next level
+when the first run reaches it, its matrices side by side. The two starts' runs of one registration
+solve the same matrices at each level (only the right-hand sides differ) with the same
+factorisations, to the same bits as their own.
 """
 
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 import qdldl
-from scipy.sparse import diags
+from scipy.sparse import csr_matrix, diags
 
 from .symmetry import MirrorTerm
 
 
-class SharedFactors:
-    """The factorisations at each stiffness level (0 the stiffest, counting relaxations) of one or two
-    runs walking the levels in order. A level is factorised by the first run to reach it and kept
-    while the other run may still reach it and needs no new solvers for it. A run moving on
-    refactorises (QDLDL's numeric step, the symbolic analysis kept) the solvers of the level it
-    leaves if the other run is not at it, or of one both runs have passed: at most two levels'
-    solvers are alive, one per run; each level is factorised once where the runs keep within a
-    level of each other, twice where one has left it before the other reaches it. `factorised`
-    counts the levels factorised."""
+@dataclass(frozen=True)
+class Stiffness:
+    """The system's matrices and weights at each level: w_data the data terms' weight per vertex, lap
+    the (n, n) membrane Laplacian, selector (n,) 1 at the landmarks pulled, mirror (across, along)
+    (n, n) the mirror pairs' matrices (`MirrorTerm`; None: no mirror term) at k per unit of membrane;
+    level 0 at (membrane, landmark), each next level both times relax."""
 
-    def __init__(self, runs: int):
+    w_data: float
+    lap: csr_matrix
+    selector: np.ndarray
+    mirror: tuple[csr_matrix, csr_matrix] | None
+    k: float
+    membrane: float
+    landmark: float
+    relax: float
+
+    def weights(self, level: int) -> tuple[float, float]:
+        """(membrane weight mu, landmark weight lam) at `level`."""
+        scale = self.relax**level
+        return self.membrane * scale, self.landmark * scale
+
+    def matrices(self, level: int) -> list:
+        """The CSC matrices at `level`: one, or with the mirror term across and along its plane."""
+        mu, lam = self.weights(level)
+        base = diags(self.w_data + lam * self.selector) + mu * self.lap
+        matrices = [base] if self.mirror is None else [base + self.k * mu * m for m in self.mirror]
+        return [m.tocsc() for m in matrices]
+
+
+class SharedFactors:
+    """The factorisations at each stiffness level (0 the stiffest) of one or two runs
+    walking them in order, made in a thread of their own: the first at once, each other when the
+    first run reaches it. A factorisation reuses (QDLDL's numeric step, the symbolic
+    analysis kept) the solvers of a level no run is at and some run has passed, first one every run
+    has passed: a run far behind the other factorises the levels between again. `factorised` counts
+    the levels factorised. Used as a context manager: on leaving it the thread stops (a level it has
+    begun is finished and dropped)."""
+
+    def __init__(self, runs: int, stiffness: Stiffness):
+        self.stiffness = stiffness
         self.position = [0] * runs
-        self.levels: dict[int, tuple[tuple, Future]] = {}
+        self.levels: dict[int, Future] = {}
         self.lock = threading.Lock()
         self.factorised = 0
-
-    def solvers(self, run: int, level: int, key: tuple, matrices) -> list:
-        """The solvers of `level` for run number `run`, factorised from `matrices()` (a list of CSC
-        matrices) by the first run to reach it; a run reaching it later waits for them. `key`: what
-        makes the matrices (their weights), the same for every run at one level."""
+        self.pool = ThreadPoolExecutor(max_workers=1)
         with self.lock:
-            left, self.position[run] = self.position[run], level
-            first = level not in self.levels
-            if first:
-                spare = self._free(left)
-                self.levels[level] = key, Future()
-                self.factorised += 1
-            made_for, made = self.levels[level]
-        if made_for != key:
-            raise ValueError(f"stiffness level {level} asked for with {key}, factorised with {made_for}")
-        if first:
-            try:
-                made.set_result(_factorised(matrices(), spare))
-            except BaseException as error:
-                made.set_exception(error)
+            self._queue(0)
+
+    def __enter__(self) -> "SharedFactors":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+
+    def solvers(self, run: int, level: int) -> list:
+        """The solvers of `level` for run number `run` (waiting for them if they are being made)."""
+        with self.lock:
+            self.position[run] = level
+            self._queue(level)
+            made = self.levels[level]
         return made.result()
 
     def finished(self, run: int) -> None:
@@ -60,51 +88,55 @@ class SharedFactors:
         with self.lock:
             self.position[run] = np.inf
             for level in [k for k in self.levels if k < min(self.position)]:
-                del self.levels[level]
+                self.levels.pop(level).cancel()
 
-    def _free(self, left: int) -> list | None:
-        """Factorised solvers no run is at, taken out of their level (lock held): the level `left`
-        (the one the requesting run leaves), or one every run has passed; None if there are none."""
-        for level in sorted(self.levels):
-            made = self.levels[level][1]
-            if level not in self.position and (level == left or level < min(self.position)) and made.done() and made.exception() is None:
-                return self.levels.pop(level)[1].result()
-        return None
+    def _queue(self, level: int) -> None:
+        """`level` queued for factorising unless made or queued (lock held)."""
+        if level not in self.levels:
+            self.levels[level] = self.pool.submit(self._factorise, level)
+            self.factorised += 1
+
+    def _factorise(self, level: int) -> list:
+        """The solvers of `level`, refactorised from a spare level's where there is one."""
+        with self.lock:
+            spare = self._spare()
+        return _factorised(self.stiffness.matrices(level), spare)
+
+    def _spare(self) -> list | None:
+        """Made solvers of a level no run is at and some run has passed, taken out of it (lock held):
+        one every run has passed first; None if there are none."""
+        passed = [k for k in sorted(self.levels) if k not in self.position and k < max(self.position) and self.levels[k].done()
+                  and self.levels[k].exception() is None]
+        if not passed:
+            return None
+        return self.levels.pop(min(passed, key=lambda k: k >= min(self.position))).result()
 
 
 def _factorised(matrices: list, spare: list | None) -> list:
-    """QDLDL solvers of the CSC `matrices`: `spare`'s (of matrices of the same patterns) refactorised, or new."""
-    if spare is None:
-        return [qdldl.Solver(m) for m in matrices]
-    for solver, m in zip(spare, matrices):
-        solver.update(m)
+    """QDLDL solvers of the CSC `matrices`: `spare`'s (of matrices of the same patterns) refactorised, or
+    new; each matrix in a thread of its own (QDLDL releases the GIL)."""
+    with ThreadPoolExecutor(max_workers=len(matrices)) as pool:
+        if spare is None:
+            return list(pool.map(qdldl.Solver, matrices))
+        list(pool.map(lambda sm: sm[0].update(sm[1]), zip(spare, matrices)))
     return spare
 
 
 class ElasticSystem:
-    """(w I + mu L + lam S + k mu M) X = B for (n, 3) right-hand sides, M the mirror term (if any), k its
-    weight per unit of membrane, at the stiffness level set by `at` (level 0 at mu, lam to begin).
-    shared: the factorisations shared with the other run, and this run's number. Without a mirror
-    term one matrix serves x, y and z; with one, the system is solved in the plane's frame, one
-    matrix across it, one along."""
+    """(w I + mu L + lam S + k mu M) X = B for (n, 3) right-hand sides, M the mirror term (if any), at
+    the stiffness level set by `at` (level 0 to begin). shared: the factorisations shared with the
+    other run, and this run's number. Without a mirror term one matrix serves x, y and z; with one,
+    the system is solved in the plane's frame, one matrix across it, one along."""
 
-    def __init__(self, w_data: float, lap, selector: np.ndarray, mirror: MirrorTerm | None, k: float, shared: tuple[SharedFactors, int],
-                 mu: float, lam: float):
-        self.w_data, self.lap, self.selector, self.mirror, self.k = w_data, lap, selector, mirror, k
+    def __init__(self, mirror: MirrorTerm | None, shared: tuple[SharedFactors, int]):
+        self.mirror = mirror
         self.factors, self.run = shared
-        self.at(0, mu, lam)
+        self.at(0)
 
-    def at(self, level: int, mu: float, lam: float) -> None:
-        """Stiffness level `level`: membrane weight mu, landmark weight lam (factorised by the first run to reach it)."""
-        self.weight = self.k * mu
-        key = (self.w_data, mu, lam, self.weight, self.mirror is None)
-        self.solvers = self.factors.solvers(self.run, level, key, lambda: self._matrices(mu, lam, self.weight))
-
-    def _matrices(self, mu: float, lam: float, weight: float) -> list:
-        """The CSC matrices at (mu, lam) and mirror weight `weight`: one, or across and along the plane."""
-        base = diags(self.w_data + lam * self.selector) + mu * self.lap
-        matrices = [base] if self.mirror is None else [base + weight * self.mirror.across, base + weight * self.mirror.along]
-        return [m.tocsc() for m in matrices]
+    def at(self, level: int) -> None:
+        """Stiffness level `level` (its solvers waited for if they are being made)."""
+        self.weight = self.factors.stiffness.k * self.factors.stiffness.weights(level)[0]
+        self.solvers = self.factors.solvers(self.run, level)
 
     def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`: x, y and z
