@@ -17,7 +17,7 @@ import trimesh
 from distributed import LocalCluster
 
 from records import written
-from cpapfit.batch import find_scans
+from cpapfit.batch import dask_client, find_scans
 from cpapfit.cli import main
 from cpapfit.io.phantom import write_phantom
 from cpapfit.io.summary import summary_csv, summary_html
@@ -176,6 +176,15 @@ def test_kept_outputs_give_their_fit_numbers_and_changed_input_that_fails_remove
     row = run_scan(task)
     assert row.status == "failed" and "face.ply" in row.error and row.leak_l_min is None
     assert ",failed," in summary_csv([row]).decode() and not task.out.exists()
+
+
+def test_local_workers_keep_glibcs_own_memory_thresholds():
+    """The local cluster's worker processes start without Dask's MALLOC_TRIM_THRESHOLD_ (which pins
+    glibc's mmap threshold and made a design ~1.5 times the CPU), with the numeric libraries on
+    one thread as Dask sets them."""
+    with dask_client(workers=1) as client:
+        (environ,) = client.run(lambda: {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "OPENBLAS_NUM_THREADS")}).values()
+    assert environ == {"MALLOC_TRIM_THRESHOLD_": None, "OPENBLAS_NUM_THREADS": "1"}
 
 
 def test_scans_found_and_named(tmp_path):
