@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from cpapfit.align.correspondences import make_target, oriented
 from cpapfit.align.morphable import fit_shape
+from cpapfit.align import nonrigid
 from cpapfit.align.nonrigid import SHARE_DECIMALS, NonrigidParams, morphable_share, vertex_normals
 from cpapfit.similarity import fit_similarity
 from cpapfit.ict import ict_face, load_ict, template_truth
@@ -130,18 +131,22 @@ def test_the_morphable_share_eases_between_the_blend_bounds():
     assert morphable_share(0.899, (0.9, 0.9)) == 1.0 and morphable_share(0.9, (0.9, 0.9)) == 0.0  # bounds met: a cut
 
 
-def test_trusted_landmarks_register_both_runs_again_and_blend_them(tmp_path):
+def test_trusted_landmarks_register_both_runs_again_and_blend_them(tmp_path, monkeypatch):
     """A user's landmarks on the template subject's true places: trusted, both runs are registered
-    again at the paper's weight and blended by the share of the product read at the first pass: the
-    registration is that blend of the affine run so registered (one start alone) and of the
-    morphable run beside it, which is not the first pass's morphable run."""
+    again at the paper's weight and blended by the share of the product read at the first pass (at
+    a tenth of the weight, as untrusted landmarks are): the registration is that blend of the affine
+    run so registered (one start alone) and of the morphable run beside it, which is not the first
+    pass's morphable run."""
     ph = make_phantom(4, pose=FRAMED)
     scan, truth = _capture(ph, tmp_path / "capture"), ph.surface
     al = align(scan)
     index = al.landmarks.template_index
     user = replace(al, landmarks=Landmarks(scan.vertices[cKDTree(scan.vertices).query(truth[index])[1]], index, np.ones(len(index)), "user"))
+    weighed, weigh = [], nonrigid._weighed
+    monkeypatch.setattr(nonrigid, "_weighed", lambda *args: weighed.append(weigh(*args)) or weighed[-1])
     trusted = register_template(scan, user)
-    untrusted = register_template(scan, user, replace(NonrigidParams(), user_trust_mm=0.0))
+    (untrusted, again) = weighed  # the first pass, and the runs registered again
+    assert again.landmark_factor == 1.0
     affine = register_template(scan, user, replace(NonrigidParams(), morphable=None))
     share = trusted.morphable_share
     assert trusted.landmark_factor == affine.landmark_factor == 1.0 and untrusted.landmark_factor == pytest.approx(0.1)
