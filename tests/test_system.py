@@ -75,6 +75,7 @@ def test_level_matrices_carry_the_level_weights():
 
 
 def test_the_first_level_is_factorised_before_any_run_asks(monkeypatch):
+    """Level 0 is made as the factorisations are set up, before a run asks for it, to its own bits."""
     made = counted(monkeypatch)
     with SharedFactors(2, STIFFNESS) as factors:
         first = factors.levels[0].result(WAIT_S)
@@ -110,6 +111,27 @@ def test_a_run_far_behind_solves_its_own_levels():
         assert all(np.array_equal(a, b) for a, b in zip(first[level], own(level, rhs)))
         assert all(np.array_equal(a, b) for a, b in zip(second[level], own(level, rhs)))
     assert factors.levels == {}
+
+
+def test_a_run_ahead_never_takes_the_level_the_other_is_solving_at():
+    """Run 0 walks every level while run 1 stands at level 1: the levels it leaves are reused for the
+    next ones, never level 1, whose solvers still give run 1 its own bits; run 1 then walks on."""
+    rhs = np.ones(300)
+
+    def solved(solvers: list) -> list:
+        return [s.solve(rhs) for s in solvers]
+
+    with SharedFactors(2, STIFFNESS) as factors:
+        factors.solvers(1, 0)
+        standing = factors.solvers(1, 1)
+        ahead = [solved(factors.solvers(0, level)) for level in range(LEVELS)]
+        factors.finished(0)
+        still = solved(standing)
+        later = [solved(factors.solvers(1, level)) for level in range(2, LEVELS)]
+        factors.finished(1)
+    same = lambda got, level: all(np.array_equal(a, b) for a, b in zip(got, own(level, rhs)))  # noqa: E731
+    assert all(same(got, level) for level, got in enumerate(ahead)) and same(still, 1)
+    assert all(same(got, level) for level, got in zip(range(2, LEVELS), later))
 
 
 def test_a_failing_factorisation_fails_every_run():

@@ -45,7 +45,7 @@ same weight, so the system matrix (w I + mu L + lambda S) is the same for x, y a
 not change between iterations at one stiffness: it is factorised once per stiffness level (a
 handful of times, reusing the symbolic analysis) and each iteration is three back-substitutions.
 The mirror term is solved in the plane's frame, where it adds one matrix across the plane and
-another along it: two factorisations per level instead of one. The two starts' runs build the same
+another along it: two factorisations per level instead of one. The two starts' runs solve the same
 matrices and share their factorisations; the matrices are the template's and the levels' weights,
 so a thread of their own factorises the first level while the starts are made (`align/system.py`).
 """
@@ -336,8 +336,9 @@ def _mirror_term(start: np.ndarray, target: Target, pairs: MirrorPairs, params: 
 
 def _register(aligned: np.ndarray, faces: np.ndarray, setup: _Setup, landmarks: tuple, factor: float, params: NonrigidParams,
               shared: tuple[SharedFactors, int]) -> Registration:
-    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` at `factor` of the paper's
-    weight; shared: (the factorisations shared with runs of the same system, this run's number)."""
+    """The elastic ICP with (template indices, (k, 3) scan points) `landmarks` (`factor`: the share of the
+    paper's weight they are pulled at, recorded; the weights are the shared system's); shared: (the
+    factorisations shared with runs of the same system, this run's number)."""
     vf, target, lap, start, mirror = setup
     lm_index, lm_target = landmarks
     stiffness = shared[0].stiffness

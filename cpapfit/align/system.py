@@ -21,12 +21,12 @@ from scipy.sparse import csr_matrix, diags
 from .symmetry import MirrorTerm
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Stiffness:
     """The system's matrices and weights at each level: w_data the data terms' weight per vertex, lap
     the (n, n) membrane Laplacian, selector (n,) 1 at the landmarks pulled, mirror (across, along)
-    (n, n) the mirror pairs' matrices (`MirrorTerm`; None: no mirror term) at k per unit of membrane;
-    level 0 at (membrane, landmark), each next level both times relax."""
+    (n, n) the mirror pairs' matrices (`symmetry.MirrorPairs`; None: no mirror term) at k per unit of
+    membrane; level 0 at (membrane, landmark), each next level both times relax."""
 
     w_data: float
     lap: csr_matrix
@@ -38,9 +38,11 @@ class Stiffness:
     relax: float
 
     def weights(self, level: int) -> tuple[float, float]:
-        """(membrane weight mu, landmark weight lam) at `level`."""
-        scale = self.relax**level
-        return self.membrane * scale, self.landmark * scale
+        """(membrane weight mu, landmark weight lam) at `level`: relaxed once a level."""
+        mu, lam = self.membrane, self.landmark
+        for _ in range(level):
+            mu, lam = mu * self.relax, lam * self.relax
+        return mu, lam
 
     def matrices(self, level: int) -> list:
         """The CSC matrices at `level`: one, or with the mirror term across and along its plane."""
@@ -56,7 +58,7 @@ class SharedFactors:
     first run reaches it. A factorisation reuses (QDLDL's numeric step, the symbolic
     analysis kept) the solvers of a level no run is at and some run has passed, first one every run
     has passed: a run far behind the other factorises the levels between again. `factorised` counts
-    the levels factorised. Used as a context manager: on leaving it the thread stops (a level it has
+    the levels queued for factorising. Used as a context manager: on leaving it the thread stops (a level it has
     begun is finished and dropped)."""
 
     def __init__(self, runs: int, stiffness: Stiffness):
@@ -74,6 +76,7 @@ class SharedFactors:
 
     def __exit__(self, *exc) -> None:
         self.pool.shutdown(wait=False, cancel_futures=True)
+        self.levels.clear()
 
     def solvers(self, run: int, level: int) -> list:
         """The solvers of `level` for run number `run` (waiting for them if they are being made)."""
@@ -137,6 +140,8 @@ class ElasticSystem:
         """Stiffness level `level` (its solvers waited for if they are being made)."""
         self.weight = self.factors.stiffness.k * self.factors.stiffness.weights(level)[0]
         self.solvers = self.factors.solvers(self.run, level)
+        if len(self.solvers) != (1 if self.mirror is None else 2):
+            raise ValueError(f"{len(self.solvers)} matrices factorised for a system {'without' if self.mirror is None else 'with'} a mirror term")
 
     def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
         """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`: x, y and z
