@@ -198,8 +198,7 @@ def register(
     spread = float(np.median(np.linalg.norm(lm_target - first.vertices[lm_index], axis=1))) if len(lm_index) else np.nan
     if landmarks is not None and landmarks.path == "user" and spread <= params.user_trust_mm:
         setup = runs[0][0]
-        mirrored = None if setup.mirror is None else (setup.mirror.across, setup.mirror.along)
-        with SharedFactors(len(runs), _stiffness(setup.lap, mirrored, lm_index, 1.0, params)) as factors:
+        with SharedFactors(len(runs), _stiffness(setup.lap, setup.mirror, lm_index, 1.0, params)) as factors:
             again = _elastic_runs(aligned, faces, [lambda setup=setup: setup for setup, _ in runs], (lm_index, lm_target), 1.0, params, factors)
         first = _weighed(again, product, faces, params)
     return replace(first, landmark_spread_mm=spread)
@@ -283,7 +282,7 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
     lap = laplacian(aligned, faces)
     pairs = None if mirror is None or params.symmetry == 0 else mirror_pairs(mirror)
     morphable = basis is not None and params.morphable is not None
-    stiffness = _stiffness(lap, None if pairs is None else (pairs.across, pairs.along), landmarks[0], factor, params)
+    stiffness = _stiffness(lap, pairs, landmarks[0], factor, params)
     with SharedFactors(1 + morphable, stiffness) as factors:
         target = oriented(make_target(scan, use_grid, median_edge(aligned, faces)), aligned, normals)
         starts = [lambda: _affine_start(aligned, normals, target, landmarks, params)]
@@ -300,14 +299,15 @@ def _runs(aligned: np.ndarray, faces: np.ndarray, scan: Scan, landmarks: tuple, 
         return _elastic_runs(aligned, faces, setups, landmarks, factor, params, factors)
 
 
-def _stiffness(lap: csr_matrix, mirror: tuple | None, lm_index: np.ndarray, factor: float, params: NonrigidParams) -> Stiffness:
+def _stiffness(lap: csr_matrix, mirror: MirrorPairs | MirrorTerm | None, lm_index: np.ndarray, factor: float,
+               params: NonrigidParams) -> Stiffness:
     """The system's matrices at each level: the (n, n) membrane Laplacian `lap`, the mirror pairs'
-    (across, along) matrices (None: no mirror term), the landmarks at template indices `lm_index`
-    pulled at `factor` of the paper's weight."""
+    across and along matrices (of `mirror`; None: no mirror term), the landmarks at template indices
+    `lm_index` pulled at `factor` of the paper's weight."""
     selector = np.zeros(lap.shape[0])
     selector[lm_index] = 1.0
-    return Stiffness(params.point_to_point + params.point_to_plane, lap, selector, mirror, params.symmetry / params.membrane,
-                     params.membrane, params.landmark * factor, params.relax_factor)
+    return Stiffness(params.point_to_point + params.point_to_plane, lap, selector, None if mirror is None else (mirror.across, mirror.along),
+                     params.symmetry / params.membrane, params.membrane, params.landmark * factor, params.relax_factor)
 
 
 def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmarks: tuple, factor: float,
