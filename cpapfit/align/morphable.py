@@ -103,6 +103,7 @@ def fit_shape(
     local = np.hstack([basis.template, np.ones((len(start), 1))])
     linear = np.linalg.lstsq(local, start, rcond=None)[0][:3]  # start = template @ linear + shift
     modes = basis.modes @ linear  # (M, N, 3) in the scan's frame
+    by_vertex = np.ascontiguousarray(np.transpose(modes, (1, 2, 0)))  # (N, 3, M): a vertex's rows gathered at once
     centre = start.mean(axis=0)
     coef, turn, shift = np.zeros(len(modes)), np.eye(3), np.zeros(3)
     prior = basis.prior * params.prior_mm**2
@@ -113,7 +114,7 @@ def fit_shape(
         keep = closest_pairs(m, current[sample], target, params.trim)
         if len(keep) < len(modes) + 6:
             break
-        step = _solve(current[sample[keep]] - centre, modes[:, sample[keep]] @ turn.T, target.vertices[m.index[keep]] - centre,
+        step = _solve(current[sample[keep]] - centre, turn @ by_vertex[sample[keep]], target.vertices[m.index[keep]] - centre,
                       target.normals[m.index[keep]], weights, prior, coef)
         coef = coef + step[:-6]
         small = Rotation.from_rotvec(step[-6:-3]).as_matrix()
@@ -126,13 +127,13 @@ def fit_shape(
 def _solve(x: np.ndarray, modes: np.ndarray, q: np.ndarray, n: np.ndarray, weights: tuple[float, float],
            prior: np.ndarray, coef: np.ndarray) -> np.ndarray:
     """(M + 6,) the step (coefficients, then a small rotation vector and a shift, mm) minimising, over
-    the P pairs of (P, 3) points `x` (about the centre) moved by the (M, P, 3) `modes` and the rigid
+    the P pairs of (P, 3) points `x` (about the centre) moved by the (P, 3, M) `modes` and the rigid
     step to (P, 3) scan points `q` with unit normals `n`: point-to-plane and point-to-point squares
     (weighted) plus prior_m (coef_m + step_m)^2."""
     w_pp, w_pl = weights
     p = len(x)
     rigid = np.concatenate([-_skew(x), np.broadcast_to(np.eye(3), (p, 3, 3))], axis=2)  # (P, 3, 6): w x + t
-    jac = np.concatenate([np.transpose(modes, (1, 2, 0)), rigid], axis=2)  # (P, 3, M + 6)
+    jac = np.concatenate([modes, rigid], axis=2)  # (P, 3, M + 6)
     plane = np.einsum("pcu,pc->pu", jac, n)
     flat = jac.reshape(3 * p, -1)
     reg = np.diag(np.concatenate([prior, np.zeros(6)]))
