@@ -1,11 +1,11 @@
 """The elastic ICP's linear system at each stiffness level, factorised ahead of the runs that solve it.
 
 At membrane weight mu and landmark weight lam the system (w I + mu L + lam S + k mu M) X = B does not
-change between iterations (`align/nonrigid.py`): it is factorised once per stiffness level (QDLDL's
-sparse LDL^T). Its matrices are the template's (the membrane, the landmarks it pulls, the mirror
+change between iterations (`align/nonrigid.py`): it is factorised once per stiffness level (CHOLMOD's
+Cholesky factorisation, `Cholesky`). Its matrices are the template's (the membrane, the landmarks it pulls, the mirror
 pairs) and the level's weights, known before the scan is looked at: a thread of their own factorises
 the first level while the scan is made a target and the runs' starts are fitted, and each next level
-when the first run reaches it, its matrices side by side. The two starts' runs of one registration
+when the first run reaches it. The two starts' runs of one registration
 solve the same matrices at each level (only the right-hand sides differ) with the same
 factorisations, to the same bits as their own.
 """
@@ -15,8 +15,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-import qdldl
-from scipy.sparse import csr_matrix, diags
+from cvxopt import cholmod, matrix, spmatrix
+from scipy.sparse import csc_matrix, csr_matrix, diags
 
 from .symmetry import MirrorTerm
 
@@ -55,7 +55,7 @@ class Stiffness:
 class SharedFactors:
     """The factorisations at each stiffness level (0 the stiffest) of one or two runs
     walking them in order, made in a thread of their own: the first at once, each other when the
-    first run reaches it. A factorisation reuses (QDLDL's numeric step, the symbolic
+    first run reaches it. A factorisation reuses (`Cholesky.update`: the numeric step, the symbolic
     analysis kept) the solvers of a level no run is at and some run has passed, first one every run
     has passed: a run far behind the other factorises the levels between again. `factorised` counts
     the levels queued for factorising. Used as a context manager: on leaving it the thread stops (a level it has
@@ -115,13 +115,42 @@ class SharedFactors:
         return self.levels.pop(min(passed, key=lambda k: k >= min(self.position))).result()
 
 
+class Cholesky:
+    """CHOLMOD's Cholesky factorisation (through cvxopt; supernodal where CHOLMOD finds it pays) of a
+    sparse symmetric positive definite (n, n) matrix: its symbolic analysis made once and kept when
+    it is refactorised for another matrix of the same pattern (`update`)."""
+
+    def __init__(self, a: csc_matrix):
+        lower = _lower(a)
+        self.factor = cholmod.symbolic(lower)
+        cholmod.numeric(lower, self.factor)
+
+    def update(self, a: csc_matrix) -> None:
+        """Refactorised for `a`, of the same pattern as the matrix it was made for."""
+        cholmod.numeric(_lower(a), self.factor)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """The solution of A X = rhs for an (n,) or (n, k) right-hand side, of its shape."""
+        x = matrix(np.asarray(rhs, dtype=np.float64).reshape(len(rhs), -1))
+        cholmod.solve(self.factor, x)
+        return np.array(x).reshape(rhs.shape)
+
+
+def _lower(a: csc_matrix) -> spmatrix:
+    """The lower triangle of a sparse matrix as cvxopt's (the triangle CHOLMOD reads)."""
+    a = csc_matrix(a)
+    col = np.repeat(np.arange(a.shape[1]), np.diff(a.indptr))
+    keep = a.indices >= col
+    return spmatrix(matrix(a.data[keep]), matrix(a.indices[keep].astype(np.int_)), matrix(col[keep]), size=a.shape)
+
+
 def _factorised(matrices: list, spare: list | None) -> list:
-    """QDLDL solvers of the CSC `matrices`: `spare`'s (of matrices of the same patterns) refactorised, or
-    new; each matrix in a thread of its own (QDLDL releases the GIL)."""
-    with ThreadPoolExecutor(max_workers=len(matrices)) as pool:
-        if spare is None:
-            return list(pool.map(qdldl.Solver, matrices))
-        list(pool.map(lambda sm: sm[0].update(sm[1]), zip(spare, matrices)))
+    """Factorisations (`Cholesky`) of the CSC `matrices`: `spare`'s (of matrices of the same patterns)
+    refactorised, or new."""
+    if spare is None:
+        return [Cholesky(m) for m in matrices]
+    for solver, m in zip(spare, matrices):
+        solver.update(m)
     return spare
 
 
@@ -144,19 +173,12 @@ class ElasticSystem:
             raise ValueError(f"{len(self.solvers)} matrices factorised for a system {'without' if self.mirror is None else 'with'} a mirror term")
 
     def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
-        """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`: x, y and z
-        solved side by side (QDLDL releases the GIL; each column is independent)."""
+        """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`."""
         if self.mirror is None:
-            return _columns(rhs, [self.solvers[0]] * 3)
+            return self.solvers[0].solve(rhs)
         m, w = self.mirror, self.weight
         r, s = rhs @ m.frame.T, start @ m.frame.T  # in the plane's frame
         r[:, 0] -= w * (m.across @ s[:, 0] - m.across_rhs)
         r[:, 1:] -= w * (m.along @ s[:, 1:])
-        return _columns(r, [self.solvers[0], self.solvers[1], self.solvers[1]]) @ m.frame
+        return np.hstack([self.solvers[0].solve(r[:, :1]), self.solvers[1].solve(r[:, 1:])]) @ m.frame
 
-
-def _columns(rhs: np.ndarray, solvers: list) -> np.ndarray:
-    """(n, 3): each column of `rhs` solved by its solver, in threads."""
-    columns = [np.ascontiguousarray(rhs[:, k]) for k in range(3)]
-    with ThreadPoolExecutor(max_workers=3) as pool:
-        return np.column_stack(list(pool.map(lambda sc: sc[0].solve(sc[1]), zip(solvers, columns))))
