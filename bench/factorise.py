@@ -94,7 +94,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
-    print(f"cpapfit {__version__}, Python {platform.python_version()}, {platform.machine()}, best of {args.repeat}")
+    print(f"cpapfit {__version__}, Python {platform.python_version()}, {platform.machine()}; CPU seconds, best of {args.repeat}")
     template = load_template()
     params = NonrigidParams()
     stiffness = _stiffness(laplacian(template.vertices, template.faces), mirror_pairs(template.mirror), np.arange(N_LANDMARKS),

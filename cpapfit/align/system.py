@@ -116,18 +116,23 @@ class SharedFactors:
 
 
 class Cholesky:
-    """CHOLMOD's Cholesky factorisation (through cvxopt; supernodal where CHOLMOD finds it pays) of a
-    sparse symmetric positive definite (n, n) matrix: its symbolic analysis made once and kept when
-    it is refactorised for another matrix of the same pattern (`update`)."""
+    """CHOLMOD's supernodal Cholesky factorisation (through cvxopt, which asks CHOLMOD for its
+    supernodal method) of a sparse symmetric positive definite (n, n) matrix: its symbolic analysis
+    made once and kept when it is refactorised for another matrix of the same pattern (`update`)."""
 
     def __init__(self, a: csc_matrix):
         lower = _lower(a)
+        self.pattern = _pattern(lower)
         self.factor = cholmod.symbolic(lower)
         cholmod.numeric(lower, self.factor)
 
     def update(self, a: csc_matrix) -> None:
-        """Refactorised for `a`, of the same pattern as the matrix it was made for."""
-        cholmod.numeric(_lower(a), self.factor)
+        """Refactorised for `a`; ValueError if its pattern is not the pattern it was made for (CHOLMOD
+        would leave out the entries outside it without a word)."""
+        lower = _lower(a)
+        if not all(np.array_equal(p, q) for p, q in zip(_pattern(lower), self.pattern)):
+            raise ValueError("a factorisation refactorised for a matrix of another sparsity pattern")
+        cholmod.numeric(lower, self.factor)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """The solution of A X = rhs for an (n,) or (n, k) right-hand side, of its shape."""
@@ -137,11 +142,18 @@ class Cholesky:
 
 
 def _lower(a: csc_matrix) -> spmatrix:
-    """The lower triangle of a sparse matrix as cvxopt's (the triangle CHOLMOD reads)."""
+    """The lower triangle of a sparse (n, n) matrix (duplicates summed, explicit zeros kept in the
+    pattern) as cvxopt's, the triangle CHOLMOD reads."""
     a = csc_matrix(a)
     col = np.repeat(np.arange(a.shape[1]), np.diff(a.indptr))
     keep = a.indices >= col
-    return spmatrix(matrix(a.data[keep]), matrix(a.indices[keep].astype(np.int_)), matrix(col[keep]), size=a.shape)
+    return spmatrix(matrix(a.data[keep].astype(np.float64)), matrix(a.indices[keep].astype(np.int_)), matrix(col[keep]), size=a.shape)
+
+
+def _pattern(lower: spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """A cvxopt sparse matrix's pattern: its column pointers and row indices."""
+    colptr, rows, _ = lower.CCS
+    return np.array(colptr), np.array(rows)
 
 
 def _factorised(matrices: list, spare: list | None) -> list:
@@ -173,7 +185,9 @@ class ElasticSystem:
             raise ValueError(f"{len(self.solvers)} matrices factorised for a system {'without' if self.mirror is None else 'with'} a mirror term")
 
     def solve(self, rhs: np.ndarray, start: np.ndarray) -> np.ndarray:
-        """The displacement (n, 3) mm from the (n, 3) `start` for right-hand side `rhs`."""
+        """The displacement (n, 3) mm from the (n, 3) `start` for the (n, 3) right-hand side `rhs`: the
+        columns that share a matrix solved in one call (x, y and z; with the mirror term the one
+        across the plane, then the two along it)."""
         if self.mirror is None:
             return self.solvers[0].solve(rhs)
         m, w = self.mirror, self.weight
@@ -181,4 +195,3 @@ class ElasticSystem:
         r[:, 0] -= w * (m.across @ s[:, 0] - m.across_rhs)
         r[:, 1:] -= w * (m.along @ s[:, 1:])
         return np.hstack([self.solvers[0].solve(r[:, :1]), self.solvers[1].solve(r[:, 1:])]) @ m.frame
-
