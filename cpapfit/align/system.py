@@ -1,13 +1,13 @@
 """The elastic ICP's linear system at each stiffness level, factorised ahead of the runs that solve it.
 
 At membrane weight mu and landmark weight lam the system (w I + mu L + lam S + k mu M) X = B does not
-change between iterations (`align/nonrigid.py`): it is factorised once per stiffness level (CHOLMOD's
-Cholesky factorisation, `Cholesky`). Its matrices are the template's (the membrane, the landmarks it pulls, the mirror
-pairs) and the level's weights, known before the scan is looked at: a thread of their own factorises
-the first level while the scan is made a target and the runs' starts are fitted, and each next level
-when the first run reaches it. The two starts' runs of one registration
-solve the same matrices at each level (only the right-hand sides differ) with the same
-factorisations, to the same bits as their own.
+change between iterations (`align/nonrigid.py`): it is factorised once per stiffness level
+(CHOLMOD's Cholesky factorisation, `Cholesky`). Its matrices are the template's (the membrane, the
+landmarks it pulls, the mirror pairs) and the level's weights, known before the scan is looked at:
+a thread of their own factorises the first level while the scan is made a target and the runs'
+starts are fitted, and each next level when the first run reaches it. The two starts' runs of one
+registration solve the same matrices at each level (only the right-hand sides differ) with the
+same factorisations, to the same bits as their own.
 """
 
 import threading
@@ -58,8 +58,8 @@ class SharedFactors:
     first run reaches it. A factorisation reuses (`Cholesky.update`: the numeric step, the symbolic
     analysis kept) the solvers of a level no run is at and some run has passed, first one every run
     has passed: a run far behind the other factorises the levels between again. `factorised` counts
-    the levels queued for factorising. Used as a context manager: on leaving it the thread stops (a level it has
-    begun is finished and dropped)."""
+    the levels queued for factorising. Used as a context manager: on leaving it the thread stops (a
+    level it has begun is finished and dropped)."""
 
     def __init__(self, runs: int, stiffness: Stiffness):
         self.stiffness = stiffness
@@ -147,7 +147,8 @@ def _lower(a: csc_matrix) -> spmatrix:
     a = csc_matrix(a)
     col = np.repeat(np.arange(a.shape[1]), np.diff(a.indptr))
     keep = a.indices >= col
-    return spmatrix(matrix(a.data[keep].astype(np.float64)), matrix(a.indices[keep].astype(np.int_)), matrix(col[keep]), size=a.shape)
+    values, rows, cols = matrix(a.data[keep].astype(np.float64)), matrix(a.indices[keep].astype(np.int_)), matrix(col[keep])
+    return spmatrix(values, rows, cols, size=a.shape)
 
 
 def _pattern(lower: spmatrix) -> tuple[np.ndarray, np.ndarray]:
