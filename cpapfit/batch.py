@@ -25,8 +25,9 @@ from .jobs import ScanResult, ScanTask, clean_leftovers, run_scan
 CONNECT_TIMEOUT_S = 10  # to reach a scheduler, and for it to have a worker
 # Dask's nanny starts its workers with MALLOC_TRIM_THRESHOLD_ set, which pins glibc's mmap threshold
 # at its 128 kB floor: every array over it is mapped afresh and its pages faulted in again, and a
-# design costs 1.3-1.5 times the CPU, over a quarter of it in the kernel (bench/RESULTS.md section 6). A design hands its memory back itself
-# between stages (`memory.release`): the local cluster's workers start without it.
+# design costs 1.3-1.5 times the CPU, over a quarter of it in the kernel (bench/RESULTS.md section
+# 6). A design hands its memory back itself between stages (`memory.release`): the local cluster's
+# workers start without it.
 WORKER_ENVIRON = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
 
 
