@@ -1,6 +1,6 @@
 """Vertex clustering: a dense mesh thinned by merging the vertices in each cube of a grid into their
 mean (off a surface of radius R by at most about cube^2 / (8 R): 6 um at 0.5 mm on a 5 mm curve),
-for the 3-D view and for pressing cushions on a scan far denser than the fit reads the skin. Sheets
+for the 3-D view and for looking at a scan far denser than the fit reads the skin (`Scan.seen`). Sheets
 of the mesh nearer each other than a cube (the lips closed on each other) are merged where they
 share one."""
 
@@ -18,24 +18,28 @@ def clustered(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[
     `faces` with the vertices of its triangles in each cube_mm cube merged into their mean (those
     in no triangle dropped); triangles left with fewer than three corners, turned over (facing
     against the triangle they came from), and repeats, dropped."""
+    return clusters(vertices, faces, cube_mm)[2:]
+
+
+def clusters(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`clustered`, with what it merged: ((U,) the vertices in some triangle, (U,) the merged vertex
+    each became, (M, 3) mm merged vertices, (T, 3) int64 triangles)."""
     used = np.unique(faces)
-    _, inverse, count = np.unique(np.floor(vertices[used] / cube_mm).astype(np.int64), axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.reshape(-1)
+    inverse, count = cubes(vertices[used], cube_mm)
     kept = np.stack([np.bincount(inverse, weights=vertices[used, c]) for c in range(3)], axis=1) / count[:, None]
     merged = inverse[np.searchsorted(used, faces)]
     whole = (merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])
     merged, faces = merged[whole], faces[whole]
     upright = np.einsum("ij,ij->i", trimesh.triangles.cross(kept[merged]), trimesh.triangles.cross(vertices[faces])) > 0
     merged = merged[upright]
-    return kept, merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
+    return used, inverse, kept, merged[np.sort(trimesh.grouping.unique_rows(np.sort(merged, axis=1))[0])]
 
 
-def thinned(surface: trimesh.Trimesh | trimesh.PointCloud, cube_mm: float) -> trimesh.Trimesh | trimesh.PointCloud:
-    """A mesh whose `median_edge` is shorter than cube_mm `clustered` in cubes that size; a coarser
-    mesh, or a point cloud, as it is."""
-    if not isinstance(surface, trimesh.Trimesh) or not len(surface.faces):
-        return surface
-    vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
-    if median_edge(vertices, faces) >= cube_mm:
-        return surface
-    return trimesh.Trimesh(*clustered(vertices, faces, cube_mm), process=False)
+def cubes(points: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """((N,) the cube_mm cube each of (N, 3) mm points lies in, the cubes numbered in lexicographic
+    order of their (x, y, z) grid indices; (K,) how many points each holds)."""
+    grid = np.floor(points / cube_mm).astype(np.int64)
+    grid -= grid.min(axis=0)
+    span = grid.max(axis=0) + 1
+    _, inverse, count = np.unique((grid[:, 0] * span[1] + grid[:, 1]) * span[2] + grid[:, 2], return_inverse=True, return_counts=True)
+    return inverse.reshape(-1), count

@@ -13,7 +13,6 @@ from .align.check import FaceCheck
 from .align.initial import initial_alignment, landmark_free_alignment
 from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
-from .clustering import thinned
 from .crop import mesh_scan_near
 from .cushion.contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
@@ -43,7 +42,6 @@ from .template import load_template, mask_region
 from .work import ahead, at_once
 
 SURFACE_REACH_MM = 30.0  # the scan kept for pressing cushions: this near the seal bands, for any size, pushed or rolled
-SURFACE_CUBE_MM = 0.5  # that scan, a mesh denser than this (median edge), vertex-clustered in cubes this size (finer than rims are read)
 
 
 @dataclass(frozen=True)
@@ -56,8 +54,9 @@ class Alignment:
 
 
 def align(scan: Scan, user_landmarks: Landmarks | None = None, landmark_noise: LandmarkNoise = LandmarkNoise()) -> Alignment:
-    """Stages landmarks and similarity on a scan (`landmark_noise` on detected landmarks: none by default)."""
-    return Alignment(*initial_alignment(scan, load_template(), user_landmarks, landmark_noise))
+    """Stages landmarks and similarity on a scan (`landmark_noise` on detected landmarks: none by
+    default), as it is seen (`Scan.seen`)."""
+    return Alignment(*initial_alignment(scan.seen, load_template(), user_landmarks, landmark_noise))
 
 
 def register_template(scan: Scan, alignment: Alignment, params: NonrigidParams = NonrigidParams()) -> Registration:
@@ -139,7 +138,7 @@ def _cross_checked(scan: Scan, alignment: Alignment, reg: Registration, params: 
 def _by_shape(scan: Scan, rejected: str, params: NonrigidParams) -> tuple[Alignment, Registration] | None:
     """The landmark-free alignment (saying what was `rejected` for it) and its registration, or None
     if it fails the face check."""
-    instead = landmark_free_alignment(scan, load_template(), rejected)
+    instead = landmark_free_alignment(scan.seen, load_template(), rejected)
     if instead is None:
         return None
     alignment = Alignment(*instead)
@@ -329,14 +328,14 @@ def _thicknesses(cushion: Cushion) -> str:
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray | None = None) -> Face:
-    """The face cushions are pressed onto: the scan within SURFACE_REACH_MM of the registered
-    template's seal bands (both masks) or of a given `cushion`'s (V, 3) mm vertices, its registered
-    template, the mask axis (the template's +z carried by the similarity) and the head's up direction
-    (its +y). A mesh scan denser than SURFACE_CUBE_MM is `thinned` to it: the seal curve is carried
-    onto it and every cushion pressed on it, and the sleep states each move a copy of it with its
-    own spatial indexes."""
+    """The face cushions are pressed onto: the scan as it is seen (`Scan.seen`: a dense mesh
+    thinned) within SURFACE_REACH_MM of the registered template's seal bands (both masks) or of a
+    given `cushion`'s (V, 3) mm vertices, its registered template, the mask axis (the template's +z
+    carried by the similarity) and the head's up direction (its +y). The seal curve is carried onto
+    it and every cushion pressed on it, and the sleep states each move a copy of it with its own
+    spatial indexes."""
     near = reg.vertices[mask_region(load_template())]
-    surface = thinned(scan_surface(scan, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM), SURFACE_CUBE_MM)
+    surface = scan_surface(scan.seen, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM)
     return face_of(surface, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 

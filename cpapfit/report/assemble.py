@@ -76,10 +76,12 @@ def state_picture(shot, d: Design, scale: ColourScale) -> Picture:
 
 
 def scan_face(scan: Scan, d: Design) -> Face:
-    """The surface the pictures show: the scan with its colours, or the registered template for a point cloud."""
+    """The surface the pictures show: the scan as it is seen (`Scan.seen`) with its colours, or the
+    registered template for a point cloud."""
     if scan.is_point_cloud:
         return Face(d.registration.vertices, load_template().faces)
-    return Face(scan.vertices, scan.faces, None if scan.colors is None else scan.colors / 255.0)
+    seen = scan.seen
+    return Face(seen.vertices, seen.faces, None if seen.colors is None else seen.colors / 255.0)
 
 
 def pressure_scale(rims: dict, window_kpa: tuple) -> ColourScale:
