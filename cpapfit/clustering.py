@@ -41,5 +41,8 @@ def cubes(points: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
     grid = np.floor(points / cube_mm).astype(np.int64)
     grid -= grid.min(axis=0)
     span = grid.max(axis=0) + 1
-    _, inverse, count = np.unique((grid[:, 0] * span[1] + grid[:, 1]) * span[2] + grid[:, 2], return_inverse=True, return_counts=True)
+    if np.prod(span.astype(float)) < 2.0**62:  # one int64 key a cube, ordered as the rows
+        _, inverse, count = np.unique((grid[:, 0] * span[1] + grid[:, 1]) * span[2] + grid[:, 2], return_inverse=True, return_counts=True)
+    else:  # a stray point far off: by rows
+        _, inverse, count = np.unique(grid, axis=0, return_inverse=True, return_counts=True)
     return inverse.reshape(-1), count

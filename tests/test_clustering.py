@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.clustering import clustered, median_edge
+from cpapfit.clustering import clustered, cubes, median_edge
 from cpapfit.scan import SEEN_CUBE_MM, Scan
 
 SPHERE = trimesh.creation.icosphere(7, radius=50.0)  # edges ~0.5 mm
@@ -53,3 +53,15 @@ def test_a_mesh_scan_denser_than_the_cube_is_seen_thinned_with_its_colours():
     cloud = Scan(scan.vertices, np.zeros((0, 3), dtype=np.int64), scan.normals)
     assert median_edge(coarse.vertices, coarse.faces) > SEEN_CUBE_MM
     assert coarse.seen is coarse and textured.seen is textured and cloud.seen is cloud
+
+
+@pytest.mark.parametrize("far_mm", [0.0, 1e15])
+def test_points_are_numbered_by_cube_in_row_order_with_a_stray_point_far_off(far_mm):
+    """`cubes` at 1 mm: 2000 points within 10 mm numbered by cube in the lexicographic order of the
+    cubes' grid rows (as np.unique over the rows), each cube's count right, with and without a
+    stray point 1e15 mm off (too far for one int64 key a cube)."""
+    rng = np.random.default_rng(3)
+    points = np.vstack([rng.uniform(-10.0, 10.0, (2000, 3)), [[far_mm, -far_mm, far_mm]]])
+    rows, inverse, count = np.unique(np.floor(points).astype(np.int64), axis=0, return_inverse=True, return_counts=True)
+    got, got_count = cubes(points, 1.0)
+    assert np.array_equal(got, inverse.reshape(-1)) and np.array_equal(got_count, count)
