@@ -24,7 +24,7 @@ from registration_starts import template_subject
 def errors(scan, truth: np.ndarray) -> dict:
     """The alignment's landmarks against the (N, 3) mm true template vertices: mean, median and the
     similarity's inliers' mean distance (mm)."""
-    landmarks, _, _ = initial_alignment(scan, load_template())
+    landmarks, _, _ = initial_alignment(scan.seen, load_template())
     e = np.linalg.norm(landmarks.points - truth[landmarks.template_index], axis=1)
     inliers = landmarks.confidence > 0.5
     return {"path": landmarks.path, "count": len(e), "mean_mm": float(e.mean()), "median_mm": float(np.median(e)),

@@ -46,7 +46,7 @@ def one(seed: int, template, region, tmp, render: str | None = None) -> dict:
         scan, truth = as_mesh(scan, rotation, render == "colour"), truth @ rotation.T
     t0 = time.perf_counter()
     try:
-        lm, fit, _ = initial_alignment(scan, template)
+        lm, fit, _ = initial_alignment(scan.seen, template)
     except CpapfitError as exc:
         return {"seed": seed, "found": False, "error": str(exc)}
     seconds = time.perf_counter() - t0

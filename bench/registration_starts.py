@@ -21,7 +21,6 @@ import cpapfit.align.nonrigid as nr
 from cpapfit.io import load_scan
 from cpapfit.io.capture import capture_files
 from cpapfit.io.write import write_files
-from cpapfit.align.morphable import MorphableParams
 from cpapfit.pipeline import align, register_template
 from cpapfit.synthetic.template_phantom import make_phantom
 from cpapfit.template import MASKS, load_template
@@ -75,7 +74,7 @@ def main() -> None:
     args = parser.parse_args()
     params = nr.NonrigidParams()
     if args.rounds is not None:
-        params = replace(params, morphable=replace(MorphableParams(), iterations=args.rounds))
+        params = replace(params, morphable=replace(params.morphable, iterations=args.rounds))
     for spec in args.subjects:
         kind, seed = spec.split(":")
         scan, truth = template_subject(int(seed)) if kind == "template" else subject(int(seed), kind, FULL_MODEL)[:2]

@@ -1,8 +1,8 @@
 """Vertex clustering: a dense mesh thinned by merging the vertices in each cube of a grid into their
 mean (off a surface of radius R by at most about cube^2 / (8 R): 6 um at 0.5 mm on a 5 mm curve),
-for the 3-D view and for looking at a scan far denser than the fit reads the skin (`Scan.seen`). Sheets
-of the mesh nearer each other than a cube (the lips closed on each other) are merged where they
-share one."""
+for the 3-D view and for looking at a scan far denser than the fit reads the skin (`Scan.seen`,
+`pipeline.face_for`). Sheets of the mesh nearer each other than a cube (the lips closed on each
+other) are merged where they share one."""
 
 import numpy as np
 import trimesh
@@ -26,7 +26,7 @@ def clusters(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[n
     each became, (M, 3) mm merged vertices, (T, 3) int64 triangles)."""
     used = np.unique(faces)
     inverse, count = cubes(vertices[used], cube_mm)
-    kept = np.stack([np.bincount(inverse, weights=vertices[used, c]) for c in range(3)], axis=1) / count[:, None]
+    kept = cube_means(vertices[used], inverse, count)
     merged = inverse[np.searchsorted(used, faces)]
     whole = (merged[:, 0] != merged[:, 1]) & (merged[:, 1] != merged[:, 2]) & (merged[:, 2] != merged[:, 0])
     merged, faces = merged[whole], faces[whole]
@@ -38,11 +38,28 @@ def clusters(vertices: np.ndarray, faces: np.ndarray, cube_mm: float) -> tuple[n
 def cubes(points: np.ndarray, cube_mm: float) -> tuple[np.ndarray, np.ndarray]:
     """((N,) the cube_mm cube each of (N, 3) mm points lies in, the cubes numbered in lexicographic
     order of their (x, y, z) grid indices; (K,) how many points each holds)."""
-    grid = np.floor(points / cube_mm).astype(np.int64)
+    grid = np.floor(points / cube_mm)
     grid -= grid.min(axis=0)
-    span = grid.max(axis=0) + 1
-    if np.prod(span.astype(float)) < 2.0**62:  # one int64 key a cube, ordered as the rows
+    span = grid.max(axis=0) + 1.0
+    if np.prod(span) < 2.0**62:  # one int64 key a cube, ordered as the rows
+        grid, span = grid.astype(np.int64), span.astype(np.int64)
         _, inverse, count = np.unique((grid[:, 0] * span[1] + grid[:, 1]) * span[2] + grid[:, 2], return_inverse=True, return_counts=True)
     else:  # a stray point far off: by rows
         _, inverse, count = np.unique(grid, axis=0, return_inverse=True, return_counts=True)
     return inverse.reshape(-1), count
+
+
+def cube_means(values: np.ndarray, inverse: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(K, C) the mean of the (N, C) `values` in each cube (`cubes`: (N,) `inverse`, (K,) `count`)."""
+    return np.stack([np.bincount(inverse, weights=values[:, c], minlength=len(count)) for c in range(values.shape[1])], axis=1) / count[:, None]
+
+
+def thinned(surface: trimesh.Trimesh | trimesh.PointCloud, cube_mm: float) -> trimesh.Trimesh | trimesh.PointCloud:
+    """A mesh whose `median_edge` is shorter than cube_mm `clustered` in cubes that size; a coarser
+    mesh, or a point cloud, as it is."""
+    if not isinstance(surface, trimesh.Trimesh) or not len(surface.faces):
+        return surface
+    vertices, faces = np.asarray(surface.vertices), np.asarray(surface.faces)
+    if median_edge(vertices, faces) >= cube_mm:
+        return surface
+    return trimesh.Trimesh(*clustered(vertices, faces, cube_mm), process=False)

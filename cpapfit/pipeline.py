@@ -13,6 +13,7 @@ from .align.check import FaceCheck
 from .align.initial import initial_alignment, landmark_free_alignment
 from .align.morphable import ShapeBasis, ict_basis
 from .align.nonrigid import NonrigidParams, Registration, register
+from .clustering import thinned
 from .crop import mesh_scan_near
 from .cushion.contact import Contact, transfer_contact
 from .cushion.nurbs import Cushion, CushionParams, design_cushion
@@ -36,7 +37,7 @@ from .similarity import Similarity
 from .solids import self_intersecting_edges
 from .landmarks.noise import LandmarkNoise
 from .landmarks.types import Landmarks
-from .scan import Scan, scan_surface
+from .scan import SEEN_CUBE_MM, Scan, scan_surface
 from .stock_fit import StockComparison, fitting_stock, stock_solids
 from .template import load_template, mask_region
 from .work import ahead, at_once
@@ -328,14 +329,15 @@ def _thicknesses(cushion: Cushion) -> str:
 
 
 def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray | None = None) -> Face:
-    """The face cushions are pressed onto: the scan as it is seen (`Scan.seen`: a dense mesh
-    thinned) within SURFACE_REACH_MM of the registered template's seal bands (both masks) or of a
-    given `cushion`'s (V, 3) mm vertices, its registered template, the mask axis (the template's +z
-    carried by the similarity) and the head's up direction (its +y). The seal curve is carried onto
-    it and every cushion pressed on it, and the sleep states each move a copy of it with its own
-    spatial indexes."""
+    """The face cushions are pressed onto: the scan as it is seen (`Scan.seen`) within
+    SURFACE_REACH_MM of the registered template's seal bands (both masks) or of a given `cushion`'s
+    (V, 3) mm vertices, `thinned` to SEEN_CUBE_MM where still denser (a dense textured mesh or
+    capture, a mesh dense only at the face), its registered template, the mask axis (the template's
+    +z carried by the similarity) and the head's up direction (its +y). The seal curve is carried
+    onto it and every cushion pressed on it, and the sleep states each move a copy of it with its
+    own spatial indexes."""
     near = reg.vertices[mask_region(load_template())]
-    surface = scan_surface(scan.seen, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM)
+    surface = thinned(scan_surface(scan.seen, near if cushion is None else np.vstack([near, cushion]), SURFACE_REACH_MM), SEEN_CUBE_MM)
     return face_of(surface, reg.vertices, al.similarity.rotation[:, 2], al.similarity.rotation[:, 1])
 
 

@@ -1,19 +1,18 @@
 """The `Scan` type every stage reads: a face surface in millimetres, with what the sensor gave."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from .clustering import clusters, median_edge
+from .clustering import clusters, cube_means, median_edge
 from .frozen import freeze_arrays
 from .normals import mesh_normals
 from .rims import boundary_vertices, cloud_boundary, grid_boundary
 
 SEEN_CUBE_MM = 0.5  # a mesh scan denser than this (median edge) is seen thinned to cubes this size (finer than rims are read)
-
 
 
 def robust_extent(vertices: np.ndarray) -> float:
@@ -130,24 +129,21 @@ class Scan:
 
     @cached_property
     def seen(self) -> "Scan":
-        """The scan as it is looked at: rendered for its landmarks and its pictures, cropped for
-        pressing cushions on. A mesh scan (not a capture) with no texture map whose median edge is
-        under SEEN_CUBE_MM, its vertices in each cube that size merged (`clustering.clustered`:
-        within microns of its surface), their colours averaged, its normals those of the merged
-        mesh; any other scan itself. Its landmarks, alignment and contact read the same as on the
-        scan, at a fraction of the cost on a scan of millions of triangles; the registration and the
-        quality gates read the scan itself."""
-        if not self.is_mesh or self.texture is not None or median_edge(self.vertices, self.faces) >= SEEN_CUBE_MM:
+        """The scan as it is looked at: its landmarks found and the alignment checked on it, its
+        pictures drawn from it, the surface cushions are pressed on cut from it. A scanner's mesh
+        (not a capture or a fused sweep) with no texture map whose median edge is under
+        SEEN_CUBE_MM, its vertices in each cube that size merged (`clustering.clustered`: within
+        microns of its surface), their colours averaged, its normals those of the merged mesh; any
+        other scan itself. Its registration and the quality gates' own readings of the skin (rim
+        gaps, holes, depth) are on the scan itself; a dense mesh's design reads within the figures
+        of `bench/RESULTS.md` section 5 of one with its landmarks found on the whole scan."""
+        if not self.is_mesh or self.fused_frames or self.texture is not None or median_edge(self.vertices, self.faces) >= SEEN_CUBE_MM:
             return self
         used, cube, vertices, faces = clusters(self.vertices, self.faces, SEEN_CUBE_MM)
         kept = np.unique(faces)  # the merged vertices some triangle still uses
-        colors = None
-        if self.colors is not None:
-            mean = np.stack([np.bincount(cube, weights=self.colors[used, c]) for c in range(3)], axis=1) / np.bincount(cube)[:, None]
-            colors = np.round(mean[kept]).astype(np.uint8)
+        colors = None if self.colors is None else np.round(cube_means(self.colors[used], cube, np.bincount(cube))[kept]).astype(np.uint8)
         vertices, faces = vertices[kept], np.searchsorted(kept, faces)
-        return Scan(vertices, faces, mesh_normals(vertices, faces)[1], self.source, self.units, self.units_note, colors,
-                    fused_frames=self.fused_frames)
+        return replace(self, vertices=vertices, faces=faces, normals=mesh_normals(vertices, faces)[1], colors=colors, uv=None)
 
 
 def scan_surface(scan: Scan, near: np.ndarray | None = None, reach_mm: float = np.inf) -> trimesh.Trimesh | trimesh.PointCloud:

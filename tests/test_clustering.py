@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.clustering import clustered, cubes, median_edge
+from cpapfit.clustering import clustered, cubes, median_edge, thinned
 from cpapfit.scan import SEEN_CUBE_MM, Scan
 
 SPHERE = trimesh.creation.icosphere(7, radius=50.0)  # edges ~0.5 mm
@@ -37,7 +37,10 @@ def test_a_mesh_scan_denser_than_the_cube_is_seen_thinned_with_its_colours():
     each colour within a level of the height's at that vertex (the mean of its cube's), the area
     within 1 %; made once. A coarser mesh, a textured one and a point cloud are seen as they are."""
     sphere = trimesh.creation.icosphere(7, radius=10.0)
-    colour = lambda v: np.round(127.5 + 12.0 * v[:, 2:3] * [1.0, -1.0, 0.5]).astype(np.uint8)  # noqa: E731
+
+    def colour(v: np.ndarray) -> np.ndarray:
+        return np.round(127.5 + 12.0 * v[:, 2:3] * [1.0, -1.0, 0.5]).astype(np.uint8)
+
     scan = Scan(np.array(sphere.vertices), np.array(sphere.faces), np.array(sphere.vertex_normals), colors=colour(sphere.vertices))
     seen = scan.seen
     assert seen is scan.seen and median_edge(scan.vertices, scan.faces) < 0.15
@@ -51,8 +54,26 @@ def test_a_mesh_scan_denser_than_the_cube_is_seen_thinned_with_its_colours():
     coarse = Scan(np.array(SPHERE.vertices) * 2.0, np.array(SPHERE.faces), np.array(SPHERE.vertex_normals))
     textured = Scan(scan.vertices, scan.faces, scan.normals, texture=np.zeros((4, 4, 3), np.uint8), uv=np.zeros((len(scan.vertices), 2)))
     cloud = Scan(scan.vertices, np.zeros((0, 3), dtype=np.int64), scan.normals)
+    fused = Scan(scan.vertices, scan.faces, scan.normals, fused_frames=2)
     assert median_edge(coarse.vertices, coarse.faces) > SEEN_CUBE_MM
-    assert coarse.seen is coarse and textured.seen is textured and cloud.seen is cloud
+    assert all(other.seen is other for other in (coarse, textured, cloud, fused))
+
+
+def test_a_mesh_is_thinned_only_where_denser_than_the_cube():
+    """The ~0.5 mm sphere thinned at 1 mm: its median edge ~1 mm, within 0.005 mm inside the sphere
+    (1 / 400 = 0.0025 mm), no triangle facing inwards, the area within 1 %; at 0.4 mm (coarser
+    than that already), a point cloud and a mesh without triangles handed back as they are."""
+    thin = thinned(SPHERE, 1.0)
+    assert np.median(thin.edges_unique_length) == pytest.approx(1.0, abs=0.25)
+    radius = np.linalg.norm(thin.vertices, axis=1)
+    assert (radius <= 50.0 + 1e-9).all() and radius.min() >= 49.995
+    assert (np.einsum("ij,ij->i", thin.face_normals, thin.triangles_center) > 0).all()
+    assert thin.area == pytest.approx(SPHERE.area, rel=0.01)
+    assert thinned(SPHERE, 0.4) is SPHERE
+    cloud = trimesh.PointCloud(SPHERE.vertices)
+    assert thinned(cloud, 1.0) is cloud
+    bare = trimesh.Trimesh(SPHERE.vertices, np.zeros((0, 3), dtype=np.int64), process=False)
+    assert thinned(bare, 1.0) is bare
 
 
 @pytest.mark.parametrize("far_mm", [0.0, 1e15])
