@@ -331,8 +331,8 @@ def _thicknesses(cushion: Cushion) -> str:
 def face_for(scan: Scan, al: Alignment, reg: Registration, cushion: np.ndarray | None = None) -> Face:
     """The face cushions are pressed onto: the scan as it is seen (`Scan.seen`) within
     SURFACE_REACH_MM of the registered template's seal bands (both masks) or of a given `cushion`'s
-    (V, 3) mm vertices, `thinned` to SEEN_CUBE_MM where still denser (a dense textured mesh or
-    capture, a mesh dense only at the face), its registered template, the mask axis (the template's
+    (V, 3) mm vertices, `thinned` to SEEN_CUBE_MM where still denser (a dense capture or fused
+    sweep, a mesh dense only at the face), its registered template, the mask axis (the template's
     +z carried by the similarity) and the head's up direction (its +y). The seal curve is carried
     onto it and every cushion pressed on it, and the sleep states each move a copy of it with its
     own spatial indexes."""

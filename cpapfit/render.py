@@ -14,7 +14,7 @@ from trimesh.ray.ray_pyembree import RayMeshIntersector
 from .frozen import freeze_arrays
 from .normals import mesh_normals
 from .rgbd import pixel_rays
-from .scan import Intrinsics
+from .scan import Intrinsics, texels
 
 
 LIGHT = np.array([-0.3, -0.4, -1.0])  # towards the light, camera frame: above left of the camera
@@ -125,15 +125,6 @@ def sample_texture(hits: Hits, faces: np.ndarray, uv: np.ndarray, texture: np.nd
 
     uv: (N, 2) per-vertex texture coordinates, origin at the image's bottom-left (OBJ/glTF as trimesh gives)."""
     return texels(texture, interpolate(hits, faces, uv))
-
-
-def texels(texture: np.ndarray, coords: np.ndarray) -> np.ndarray:
-    """(..., 3) colour in [0, 1] of an (h, w, 3) uint8 texture at (..., 2) texture coordinates
-    (nearest texel; origin at the image's bottom-left)."""
-    th, tw = texture.shape[:2]
-    col = np.clip(np.round(coords[..., 0] * (tw - 1)), 0, tw - 1).astype(np.int64)
-    row = np.clip(np.round((1.0 - coords[..., 1]) * (th - 1)), 0, th - 1).astype(np.int64)
-    return texture[row, col, :3] / 255.0
 
 
 def shade(

@@ -15,6 +15,15 @@ from .rims import boundary_vertices, cloud_boundary, grid_boundary
 SEEN_CUBE_MM = 0.5  # a mesh scan denser than this (median edge) is seen thinned to cubes this size (finer than rims are read)
 
 
+def texels(texture: np.ndarray, coords: np.ndarray) -> np.ndarray:
+    """(..., 3) colour in [0, 1] of an (h, w, 3) uint8 texture at (..., 2) texture coordinates
+    (nearest texel; origin at the image's bottom-left)."""
+    th, tw = texture.shape[:2]
+    col = np.clip(np.round(coords[..., 0] * (tw - 1)), 0, tw - 1).astype(np.int64)
+    row = np.clip(np.round((1.0 - coords[..., 1]) * (th - 1)), 0, th - 1).astype(np.int64)
+    return texture[row, col, :3] / 255.0
+
+
 def robust_extent(vertices: np.ndarray) -> float:
     """Largest 1st-to-99th percentile extent along x, y or z of (N, 3) vertices, in their units."""
     lo, hi = np.percentile(vertices, [1.0, 99.0], axis=0)
@@ -131,19 +140,20 @@ class Scan:
     def seen(self) -> "Scan":
         """The scan as it is looked at: its landmarks found and the alignment checked on it, its
         pictures drawn from it, the surface cushions are pressed on cut from it. A scanner's mesh
-        (not a capture or a fused sweep) with no texture map whose median edge is under
-        SEEN_CUBE_MM, its vertices in each cube that size merged (`clustering.clustered`: within
-        microns of its surface), their colours averaged, its normals those of the merged mesh; any
+        (not a capture or a fused sweep) whose median edge is under SEEN_CUBE_MM, its vertices in
+        each cube that size merged (`clustering.clustered`: within microns of its surface), their
+        colours (a texture map's at each vertex) averaged, its normals those of the merged mesh; any
         other scan itself. Its registration and the quality gates' own readings of the skin (rim
         gaps, holes, depth) are on the scan itself; a dense mesh's design reads within the figures
         of `bench/RESULTS.md` section 5 of one with its landmarks found on the whole scan."""
-        if not self.is_mesh or self.fused_frames or self.texture is not None or median_edge(self.vertices, self.faces) >= SEEN_CUBE_MM:
+        if not self.is_mesh or self.fused_frames or median_edge(self.vertices, self.faces) >= SEEN_CUBE_MM:
             return self
         used, cube, vertices, faces = clusters(self.vertices, self.faces, SEEN_CUBE_MM)
         kept = np.unique(faces)  # the merged vertices some triangle still uses
-        colors = None if self.colors is None else np.round(cube_means(self.colors[used], cube, np.bincount(cube))[kept]).astype(np.uint8)
+        rgb = 255.0 * texels(self.texture, self.uv) if self.texture is not None else self.colors
+        colors = None if rgb is None else np.round(cube_means(rgb[used], cube, np.bincount(cube))[kept]).astype(np.uint8)
         vertices, faces = vertices[kept], np.searchsorted(kept, faces)
-        return replace(self, vertices=vertices, faces=faces, normals=mesh_normals(vertices, faces)[1], colors=colors, uv=None)
+        return replace(self, vertices=vertices, faces=faces, normals=mesh_normals(vertices, faces)[1], colors=colors, texture=None, uv=None)
 
 
 def scan_surface(scan: Scan, near: np.ndarray | None = None, reach_mm: float = np.inf) -> trimesh.Trimesh | trimesh.PointCloud:

@@ -35,7 +35,7 @@ def test_a_mesh_scan_denser_than_the_cube_is_seen_thinned_with_its_colours():
     (`Scan.seen`) with its median edge 0.4-0.8 mm (SEEN_CUBE_MM 0.5), within 0.004 mm inside the
     sphere (0.5^2 / (8 x 10) = 0.003 mm), every vertex in a triangle, its normals unit and outwards,
     each colour within a level of the height's at that vertex (the mean of its cube's), the area
-    within 1 %; made once. A coarser mesh, a textured one and a point cloud are seen as they are."""
+    within 1 %; made once. A coarser mesh, a point cloud and a fused sweep are seen as they are."""
     sphere = trimesh.creation.icosphere(7, radius=10.0)
 
     def colour(v: np.ndarray) -> np.ndarray:
@@ -52,11 +52,25 @@ def test_a_mesh_scan_denser_than_the_cube_is_seen_thinned_with_its_colours():
     assert np.abs(seen.colors.astype(int) - colour(seen.vertices)).max() <= 1
     assert trimesh.Trimesh(seen.vertices, seen.faces).area == pytest.approx(sphere.area, rel=0.01)
     coarse = Scan(np.array(SPHERE.vertices) * 2.0, np.array(SPHERE.faces), np.array(SPHERE.vertex_normals))
-    textured = Scan(scan.vertices, scan.faces, scan.normals, texture=np.zeros((4, 4, 3), np.uint8), uv=np.zeros((len(scan.vertices), 2)))
     cloud = Scan(scan.vertices, np.zeros((0, 3), dtype=np.int64), scan.normals)
     fused = Scan(scan.vertices, scan.faces, scan.normals, fused_frames=2)
     assert median_edge(coarse.vertices, coarse.faces) > SEEN_CUBE_MM
-    assert all(other.seen is other for other in (coarse, textured, cloud, fused))
+    assert all(other.seen is other for other in (coarse, cloud, fused))
+
+
+def test_a_dense_textured_mesh_is_seen_with_its_texture_as_colours():
+    """The same sphere textured by height (a 256-texel ramp, ~12.8 levels a mm): seen with no
+    texture map, each vertex's colour within two levels of the ramp's at its height."""
+    sphere = trimesh.creation.icosphere(7, radius=10.0)
+    ramp = np.repeat(np.arange(256, dtype=np.uint8)[None, :, None], 3, axis=2)  # (1, 256, 3): red = green = blue = column
+
+    def u(v: np.ndarray) -> np.ndarray:
+        return (v[:, 2] + 10.0) / 20.0
+
+    uv = np.column_stack([u(sphere.vertices), np.full(len(sphere.vertices), 0.5)])
+    seen = Scan(np.array(sphere.vertices), np.array(sphere.faces), np.array(sphere.vertex_normals), texture=ramp, uv=uv).seen
+    assert seen.texture is None and seen.uv is None and len(seen.vertices) < len(sphere.vertices) / 4
+    assert np.abs(seen.colors[:, 0].astype(float) - 255.0 * u(seen.vertices)).max() <= 2.0
 
 
 def test_a_mesh_is_thinned_only_where_denser_than_the_cube():

@@ -6,9 +6,8 @@ import numpy as np
 import trimesh
 
 from ..errors import InputError
-from ..render import texels
 from ..rims import edge_uses, same_position
-from ..scan import Scan
+from ..scan import Scan, texels
 from ..winding import wound_against
 from .normals import cloud_normals
 from .limits import check_complete, check_declared_size, check_size
