@@ -1,11 +1,13 @@
-"""The scan as the registration's target: a coarse mesh scan subdivided without cracks, and the
-registration on the shared fran scan (3 mm triangles) lying on the scan's real surface."""
+"""The scan as the registration's target: a coarse mesh scan subdivided without cracks, its rims and
+normals; its nearest points those a brute-force search finds; and the registration on the shared
+fran scan (3 mm triangles) lying on the scan's real surface."""
 
 import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.align.correspondences import subdivided
+from cpapfit.align.correspondences import lookup, make_target, subdivided
+from cpapfit.nearest import NearestPoints
 from cpapfit.rims import boundary_vertices, cloud_boundary
 from cpapfit.scan import Scan
 from cpapfit.io import load_scan
@@ -33,6 +35,54 @@ def test_subdivision_keeps_the_surface_and_its_only_rim():
     rim_edges = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).outline().entities
     assert rim.sum() == 2 ** 2 * on_rim_before.sum() == 2 ** 2 * sum(len(e.points) - 1 for e in rim_edges)
     assert len(np.unique(vertices, axis=0)) == len(vertices)  # midpoints shared: no cracks
+
+
+def test_a_coarse_scan_made_a_target_keeps_its_rim_and_faces_out():
+    mesh = holed_sphere()
+    scan = Scan(np.array(mesh.vertices), np.array(mesh.faces), np.array(mesh.vertex_normals))
+    target = make_target(scan, use_grid=False, spacing_mm=1.0)
+    vertices, faces = subdivided(scan.vertices, scan.faces, 1.5)
+    np.testing.assert_array_equal(target.vertices, vertices)
+    np.testing.assert_array_equal(target.boundary, boundary_vertices(vertices, faces))
+    outward = np.einsum("ij,ij->i", target.normals, vertices / np.linalg.norm(vertices, axis=1, keepdims=True))
+    assert outward.min() > 0.97  # the sphere's own normals, within its 3.5 mm facets' bend
+    on_rim = np.abs(vertices[:, 2] - vertices[target.boundary, 2].mean()) < 2.0
+    assert not np.any(target.boundary & ~on_rim)  # rims only at the cut
+
+
+def test_nearest_points_are_those_a_brute_force_search_finds():
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-20.0, 20.0, (3000, 3))
+    queries = rng.uniform(-30.0, 30.0, (2000, 3))
+    every = np.linalg.norm(queries[:, None, :] - points[None, :, :], axis=2)
+    nearest = every.argmin(axis=1)
+    tree = NearestPoints(points)
+    dist, index = tree.query(queries)
+    np.testing.assert_array_equal(index, nearest)
+    np.testing.assert_allclose(dist, every.min(axis=1), rtol=0, atol=1e-12)
+    bound = float(np.median(every.min(axis=1)))
+    dist, index = tree.query(queries, bound)
+    within = every.min(axis=1) < bound
+    np.testing.assert_array_equal(index, np.where(within, nearest, len(points)))
+    assert np.isinf(dist[~within]).all() and index.dtype == np.int64
+    pair = NearestPoints(np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]]))
+    assert pair.query(np.array([[2.0, 0.0, 0.0]]), 2.0)[1][0] == 2  # 2 mm off is not nearer than 2 mm
+    assert pair.query(np.array([[2.0, 0.0, 0.0]]), 2.001)[1][0] == 0
+
+
+def test_an_empty_tree_finds_nothing():
+    dist, index = NearestPoints(np.zeros((0, 3))).query(np.ones((4, 3)))
+    assert np.isinf(dist).all() and (index == 0).all()
+    dist, index = NearestPoints(np.ones((5, 3))).query(np.zeros((0, 3)))
+    assert dist.shape == index.shape == (0,)
+
+
+def test_lookup_marks_the_unpaired():
+    mesh = holed_sphere()
+    scan = Scan(np.array(mesh.vertices), np.array(mesh.faces), np.array(mesh.vertex_normals))
+    target = make_target(scan, use_grid=False, spacing_mm=10.0)  # not subdivided: the scan itself
+    far = np.array([[0.0, 0.0, 100.0], scan.vertices[7] * 1.001])
+    np.testing.assert_array_equal(lookup(target, far, 5.0), [-1, 7])
 
 
 @pytest.mark.shared

@@ -5,14 +5,16 @@ than max_normal_deg, or when the scan point lies on the scan's rims (`Scan.rims`
 the edges of its holes), where the nearest point is not a true correspondence.
 """
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from ..scan import Scan
 from ..clustering import median_edge
+from ..nearest import NearestPoints
+from ..scan import Scan
 from ..rims import boundary_vertices
 
 
@@ -24,7 +26,7 @@ class Target:
     vertices: np.ndarray
     normals: np.ndarray
     boundary: np.ndarray
-    tree: cKDTree | None
+    tree: NearestPoints | None
     scan: Scan | None  # a capture, for projection onto its depth grid
 
 
@@ -38,13 +40,17 @@ class Matches:
 
 def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
     """The lookup structure for a scan. A mesh scan twice as coarse as `spacing_mm` is subdivided
-    first (see `subdivided`), so that its nearest vertex is near its nearest surface point."""
-    vertices, faces, normals, boundary = scan.vertices, scan.faces, scan.normals, scan.rims
-    if not scan.is_capture and len(faces) and median_edge(vertices, faces) > 2.0 * spacing_mm:
-        vertices, faces = subdivided(vertices, faces, 1.5 * spacing_mm)
-        normals = _subdivided_normals(scan, vertices, faces)
-        boundary = boundary_vertices(vertices, faces)
-    tree = None if use_grid else cKDTree(vertices, balanced_tree=False, compact_nodes=False)  # the quicker queries
+    first (see `subdivided`), so that its nearest vertex is near its nearest surface point; its rims
+    are found in a thread while its normals are made."""
+    if not scan.is_capture and len(scan.faces) and median_edge(scan.vertices, scan.faces) > 2.0 * spacing_mm:
+        vertices, faces = subdivided(scan.vertices, scan.faces, 1.5 * spacing_mm)
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            boundary = pool.submit(boundary_vertices, vertices, faces)
+            normals = _subdivided_normals(scan, vertices, faces)
+            boundary = boundary.result()
+    else:
+        vertices, faces, normals, boundary = scan.vertices, scan.faces, scan.normals, scan.rims
+    tree = None if use_grid else NearestPoints(vertices)
     return Target(vertices, normals, boundary, tree, scan if use_grid else None)
 
 
@@ -78,7 +84,7 @@ def oriented(target: Target, points: np.ndarray, normals: np.ndarray) -> Target:
 def lookup(target: Target, points: np.ndarray, max_distance_mm: float = np.inf) -> np.ndarray:
     """(n,) nearest target vertex of each point (-1 if none within max_distance_mm / off the grid)."""
     if target.tree is not None:
-        _, index = target.tree.query(points, distance_upper_bound=max_distance_mm, workers=-1)
+        _, index = target.tree.query(points, max_distance_mm)
         return np.where(index < len(target.vertices), index, -1)
     return nearest_on_grid(target.scan, points)
 

@@ -56,11 +56,11 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.spatial import cKDTree
 
 from ..clustering import median_edge
 from ..frozen import freeze_arrays
 from ..landmarks.types import Landmarks
+from ..nearest import NearestPoints
 from ..scan import Scan
 from ..thresholds import USER_TRUST_MM
 from .affine import AffineParams, apply_affine, fit_affine, starts_from
@@ -329,7 +329,7 @@ def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmark
 
 def _mirror_term(start: np.ndarray, target: Target, pairs: MirrorPairs, params: NonrigidParams) -> MirrorTerm:
     """The mirror pairs' term about the scan's plane of symmetry, found from the (n, 3) start's."""
-    near = np.isfinite(cKDTree(start).query(target.vertices, distance_upper_bound=params.symmetry_near_mm, workers=-1)[0])
+    near = np.isfinite(NearestPoints(start).query(target.vertices, params.symmetry_near_mm)[0])
     plane = symmetry_plane(target.vertices[near], target.normals[near], target.boundary[near], plane_of_pairs(start, pairs.mirror))
     return mirror_term(pairs, plane)
 

@@ -13,7 +13,8 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
-from scipy.spatial import cKDTree
+
+from ..nearest import NearestPoints
 
 PAIR_MM = (5.0, 2.0)  # the mirror ICP's pair gate, from its first iteration's to its last's
 NORMAL_COS = np.cos(np.radians(30.0))  # a point's mirrored normal and its pair's: at most 30 deg apart
@@ -62,11 +63,11 @@ def symmetry_plane(points: np.ndarray, normals: np.ndarray, rims: np.ndarray, st
     pairs gated by distance and normal, and trimmed, and the plane moved to bring them together. A
     point whose pair lies on the surface's rims ((K,) bool: its edge, a hole's edge) mirrors off the
     surface, or into a hole, and is left out."""
-    tree, plane = cKDTree(points), start
+    tree, plane = NearestPoints(points), start
     step = max(1, len(points) // MAX_POINTS)
     q, qn = points[::step], normals[::step]
     for gate in np.geomspace(*PAIR_MM, iterations):
-        dist, idx = tree.query(plane.reflect(q), distance_upper_bound=gate, workers=-1)
+        dist, idx = tree.query(plane.reflect(q), gate)
         ok = np.isfinite(dist)
         idx = np.where(ok, idx, 0)
         ok &= ~rims[idx] & (np.einsum("ij,ij->i", plane.reflect_directions(qn), normals[idx]) > NORMAL_COS)
