@@ -1,10 +1,14 @@
 """The nearest of a fixed set of 3-D points to each of many others: pykdtree's k-d tree, its queries
 spread over the cores by OpenMP with the GIL released. On the registration's queries (the template's
-28 881 vertices against a scan's 229 000) it answers in two thirds of scipy's `cKDTree` time on
-all cores, and in under half with two threads querying at once (the registration's two starts),
-with the same neighbours and distances (`bench/RESULTS.md` section 2). Of points at one distance
-from a query (a subdivided mesh's edge midpoint from the edge's ends) it may keep another than
-scipy's would.
+28 881 vertices against a scan's 229 291) it answers in about three quarters of scipy's `cKDTree`
+time on both cores, and in two thirds with two threads querying at once (the registration's two
+starts), with the same neighbours and distances (`bench/RESULTS.md` section 2). Of points at one
+distance from a query (a subdivided mesh's edge midpoint from the edge's ends) it may keep another
+than scipy's would.
+
+A thread that has queried keeps OpenMP's idle threads for the rest of the process: a process forked
+after that must not query (libgomp's threads are not copied into the child, whose next parallel
+region waits for them); `jobs.worker` forks only a process that runs one thread.
 """
 
 import numpy as np
@@ -20,9 +24,15 @@ class NearestPoints:
 
     def query(self, points: np.ndarray, bound: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """((K,) distance mm, (K,) int64 index) of the nearest point to each of (K, 3) `points` nearer
-        than `bound` mm; where there is none, the distance is inf and the index N (as scipy's)."""
-        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        if self._tree is None or len(points) == 0:
-            return np.full(len(points), np.inf), np.full(len(points), len(self.points), dtype=np.int64)
+        than `bound` mm; where there is none (or `bound` is not over 0), the distance is inf and the
+        index N, as scipy's. ValueError for points that are not (K, 3) or not finite."""
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"query points of shape {points.shape}, not (K, 3)")
+        if not np.isfinite(points).all():
+            raise ValueError("query points that are not finite")
+        n = len(self.points)
+        if self._tree is None or len(points) == 0 or not bound > 0:
+            return np.full(len(points), np.inf), np.full(len(points), n, dtype=np.int64)
         dist, index = self._tree.query(points, distance_upper_bound=None if np.isinf(bound) else float(bound))
         return dist, index.astype(np.int64)

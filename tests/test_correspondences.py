@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cpapfit.align.correspondences import lookup, make_target, subdivided
+from cpapfit.align.correspondences import _subdivided_normals, lookup, make_target, subdivided
 from cpapfit.nearest import NearestPoints
 from cpapfit.rims import boundary_vertices, cloud_boundary
 from cpapfit.scan import Scan
@@ -44,6 +44,7 @@ def test_a_coarse_scan_made_a_target_keeps_its_rim_and_faces_out():
     vertices, faces = subdivided(scan.vertices, scan.faces, 1.5)
     np.testing.assert_array_equal(target.vertices, vertices)
     np.testing.assert_array_equal(target.boundary, boundary_vertices(vertices, faces))
+    np.testing.assert_array_equal(target.normals, _subdivided_normals(scan, vertices, faces))
     outward = np.einsum("ij,ij->i", target.normals, vertices / np.linalg.norm(vertices, axis=1, keepdims=True))
     assert outward.min() > 0.97  # the sphere's own normals, within its 3.5 mm facets' bend
     on_rim = np.abs(vertices[:, 2] - vertices[target.boundary, 2].mean()) < 2.0
@@ -70,11 +71,19 @@ def test_nearest_points_are_those_a_brute_force_search_finds():
     assert pair.query(np.array([[2.0, 0.0, 0.0]]), 2.001)[1][0] == 0
 
 
-def test_an_empty_tree_finds_nothing():
+def test_an_empty_tree_or_bound_finds_nothing_and_a_point_off_the_numbers_is_refused():
     dist, index = NearestPoints(np.zeros((0, 3))).query(np.ones((4, 3)))
     assert np.isinf(dist).all() and (index == 0).all()
-    dist, index = NearestPoints(np.ones((5, 3))).query(np.zeros((0, 3)))
+    tree = NearestPoints(np.ones((5, 3)))
+    dist, index = tree.query(np.zeros((0, 3)))
     assert dist.shape == index.shape == (0,)
+    for bound in (0.0, -1.0, np.nan):
+        dist, index = tree.query(np.ones((2, 3)), bound)
+        assert np.isinf(dist).all() and (index == 5).all()
+    with pytest.raises(ValueError, match="not finite"):
+        tree.query(np.array([[0.0, np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="not \\(K, 3\\)"):
+        tree.query(np.ones(3))
 
 
 def test_lookup_marks_the_unpaired():

@@ -14,8 +14,8 @@ from scipy.spatial import cKDTree
 
 from ..clustering import median_edge
 from ..nearest import NearestPoints
-from ..scan import Scan
 from ..rims import boundary_vertices
+from ..scan import Scan
 
 
 @dataclass(frozen=True)
@@ -45,9 +45,9 @@ def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
     if not scan.is_capture and len(scan.faces) and median_edge(scan.vertices, scan.faces) > 2.0 * spacing_mm:
         vertices, faces = subdivided(scan.vertices, scan.faces, 1.5 * spacing_mm)
         with ThreadPoolExecutor(max_workers=1) as pool:
-            boundary = pool.submit(boundary_vertices, vertices, faces)
+            rims = pool.submit(boundary_vertices, vertices, faces)
             normals = _subdivided_normals(scan, vertices, faces)
-            boundary = boundary.result()
+            boundary = rims.result()
     else:
         vertices, faces, normals, boundary = scan.vertices, scan.faces, scan.normals, scan.rims
     tree = None if use_grid else NearestPoints(vertices)
