@@ -65,7 +65,7 @@ def subdivided(vertices: np.ndarray, faces: np.ndarray, edge_mm: float) -> tuple
 def _subdivided_normals(scan: Scan, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Vertex normals of a subdivided scan, oriented like the original scan's."""
     normals = np.array(trimesh.Trimesh(vertices, faces, process=False).vertex_normals)
-    _, idx = cKDTree(scan.vertices).query(vertices, workers=-1)
+    _, idx = cKDTree(scan.vertices).query(vertices, workers=-1)  # scipy's: of the two ends an edge's midpoint lies at one distance from, `nearest.py`'s may keep the other
     flip = np.einsum("ij,ij->i", normals, scan.normals[idx]) < 0
     normals[flip] *= -1
     return normals
