@@ -42,9 +42,9 @@ def boundary_vertices(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def edge_uses(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((E, 2) the distinct edges of (M, 3) faces, each vertex pair ascending, in ascending order;
     (E,) how many triangles use each)."""
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     n = int(faces.max()) + 1
-    keys, counts = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
+    keys, counts = np.unique(np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1]), return_counts=True)
     return np.stack([keys // n, keys % n], axis=1), counts
 
 

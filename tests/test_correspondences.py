@@ -8,7 +8,7 @@ import trimesh
 
 from cpapfit.align.correspondences import _subdivided_normals, lookup, make_target, subdivided
 from cpapfit.nearest import NearestPoints
-from cpapfit.rims import boundary_vertices, cloud_boundary
+from cpapfit.rims import boundary_vertices, cloud_boundary, edge_uses
 from cpapfit.scan import Scan
 from cpapfit.io import load_scan
 from cpapfit.pipeline import align, register_template
@@ -49,6 +49,18 @@ def test_a_coarse_scan_made_a_target_keeps_its_rim_and_faces_out():
     assert outward.min() > 0.97  # the sphere's own normals, within its 3.5 mm facets' bend
     on_rim = np.abs(vertices[:, 2] - vertices[target.boundary, 2].mean()) < 2.0
     assert not np.any(target.boundary & ~on_rim)  # rims only at the cut
+
+
+def test_edge_uses_counts_each_edge_once_either_way_round():
+    faces = np.array([[0, 1, 2], [2, 1, 3], [1, 0, 4], [0, 1, 5], [3, 6, 2]])
+    counted = {}
+    for face in faces.tolist():
+        for a, b in zip(face, face[1:] + face[:1]):
+            counted[min(a, b), max(a, b)] = counted.get((min(a, b), max(a, b)), 0) + 1
+    for dtype in (np.int32, np.int64):
+        edges, uses = edge_uses(faces.astype(dtype))
+        assert [tuple(e) for e in edges.tolist()] == sorted(counted)  # each pair ascending, in ascending order
+        assert uses.tolist() == [counted[e] for e in sorted(counted)]  # (0, 1) three times, (1, 2) and (2, 3) twice
 
 
 def test_nearest_points_are_those_a_brute_force_search_finds():
