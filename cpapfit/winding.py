@@ -39,7 +39,7 @@ def _neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     owner = np.tile(np.arange(len(faces)), 3)
     n = int(faces.max()) + 1
-    key = np.sort(directed, axis=1) @ np.array([n, 1], dtype=np.int64)
+    key = np.minimum(directed[:, 0], directed[:, 1]).astype(np.int64) * n + np.maximum(directed[:, 0], directed[:, 1])
     order = np.argsort(key, kind="stable")
     key = key[order]
     start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])

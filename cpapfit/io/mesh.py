@@ -21,8 +21,8 @@ MESH_SUFFIXES = (".ply", ".obj", ".stl", ".off", ".glb", ".gltf")
 def load_mesh_scan(path: Path, units: str = "auto") -> Scan:
     """Read a mesh or point-cloud file into a `Scan` in millimetres (the file's own frame)."""
     geom = read_geometry(path)
-    vertices, faces, (colors, texture, uv) = _welded(*_arrays(path, geom))
-    _check(path, vertices, faces)
+    vertices, faces, (colors, texture, uv), uses = _welded(*_arrays(path, geom))
+    _check(path, vertices, faces, uses)
     unit, note = decide_units(vertices, units)
     vertices = vertices * MM_PER_UNIT[unit]
     if len(faces):
@@ -128,9 +128,11 @@ def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
     """A triangle soup (every triangle with its own corners, as some exporters write) or a point
     cloud with the corners or points at one position joined into one, its colour their mean (a
     texture is sampled at each corner first); any other mesh unchanged. A cloud's repeated points
-    would hide its rims and its normals. Returns (vertices, faces, (colors, texture, uv))."""
-    if len(faces) and (edge_uses(faces)[1] == 2).mean() >= MIN_SHARED_EDGES:
-        return vertices, faces, appearance
+    would hide its rims and its normals. Returns (vertices, faces, (colors, texture, uv), uses: (E,)
+    how many of the faces use each of their edges, `edge_uses`; None without faces)."""
+    uses = edge_uses(faces)[1] if len(faces) else None
+    if uses is not None and (uses == 2).mean() >= MIN_SHARED_EDGES:
+        return vertices, faces, appearance, uses
     colors, texture, uv = appearance
     rgb = colors / 255.0 if colors is not None else None
     if texture is not None:
@@ -141,12 +143,13 @@ def _welded(vertices: np.ndarray, faces: np.ndarray, appearance: tuple):
     if rgb is not None:
         rgb = np.stack([np.bincount(index, rgb[:, k], len(order)) for k in range(3)], axis=1) / np.bincount(index)[:, None]
         rgb = np.round(255.0 * rgb).astype(np.uint8)
-    return joined[order], index[faces], (rgb, None, None)
+    faces = index[faces]
+    return joined[order], faces, (rgb, None, None), edge_uses(faces)[1] if len(faces) else None
 
 
-def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+def _check(path: Path, vertices: np.ndarray, faces: np.ndarray, uses: np.ndarray | None) -> None:
     """Refuse meshes no stage can use: too few or too many points, NaN/Inf, faces pointing nowhere,
-    triangles that are no surface."""
+    triangles that are no surface (`uses`: how many triangles use each edge, `edge_uses`)."""
     check_size(path, len(vertices), len(faces))
     if len(vertices) < MIN_VERTICES:
         raise InputError(f"{path}: only {len(vertices)} vertices; a face scan has thousands (is the file truncated?)")
@@ -156,7 +159,7 @@ def _check(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     if len(faces) and (faces.min() < 0 or faces.max() >= len(vertices)):
         raise InputError(f"{path}: triangles refer to vertices that do not exist; the file is corrupt")
     if len(faces):
-        check_surface(path, vertices, faces)
+        check_surface(path, vertices, faces, uses)
 
 
 def _wound_alike(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
