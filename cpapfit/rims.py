@@ -44,8 +44,14 @@ def edge_uses(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (E,) how many triangles use each)."""
     pairs = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     n = int(faces.max()) + 1
-    keys, counts = np.unique(np.minimum(pairs[:, 0], pairs[:, 1]) * n + np.maximum(pairs[:, 0], pairs[:, 1]), return_counts=True)
+    keys, counts = np.unique(pair_keys(pairs[:, 0], pairs[:, 1], n), return_counts=True)
     return np.stack([keys // n, keys % n], axis=1), counts
+
+
+def pair_keys(a: np.ndarray, b: np.ndarray, n: int) -> np.ndarray:
+    """(K,) int64: one number per unordered pair of indices below `n` (a[k], b[k]), the same either
+    way round, ascending as the pairs (smaller first) sort."""
+    return np.minimum(a, b).astype(np.int64) * n + np.maximum(a, b)
 
 
 def grid_boundary(n_vertices: int, faces: np.ndarray) -> np.ndarray:

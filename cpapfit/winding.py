@@ -11,6 +11,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
+from .rims import pair_keys
+
 
 def wound_against(faces: np.ndarray) -> np.ndarray:
     """(M,) bool: the triangles of (M, 3) `faces` (vertex indices; vertices at one position as one
@@ -39,7 +41,7 @@ def _neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     owner = np.tile(np.arange(len(faces)), 3)
     n = int(faces.max()) + 1
-    key = np.minimum(directed[:, 0], directed[:, 1]).astype(np.int64) * n + np.maximum(directed[:, 0], directed[:, 1])
+    key = pair_keys(directed[:, 0], directed[:, 1], n)
     order = np.argsort(key, kind="stable")
     key = key[order]
     start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
@@ -51,9 +53,9 @@ def _neighbours(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _disagrees(first, second, turned, child, parent, root) -> np.ndarray:
     """(len(child),) bool: whether each triangle and its parent in the tree disagree (not at the root)."""
     m1 = root + 1
-    keys = np.minimum(first, second) * m1 + np.maximum(first, second)
+    keys = pair_keys(first, second, m1)
     order = np.argsort(keys, kind="stable")
-    query = np.minimum(child, parent) * m1 + np.maximum(child, parent)
+    query = pair_keys(child, parent, m1)
     at = np.clip(np.searchsorted(keys[order], query), 0, len(order) - 1)
     found = keys[order][at] == query
     return found & turned[order][at] & (parent != root)
