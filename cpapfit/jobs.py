@@ -59,9 +59,8 @@ class DesignRun:
 @contextlib.contextmanager
 def worker(parallel: bool, shared: Callable[[], object] | None = None):
     """`submit` for work done alongside (`work.py`): a worker process forked now, while this process
-    runs a single thread (a fork copies only the calling thread: one taken after MediaPipe, Embree
-    or the registration's nearest-point queries (OpenMP, `nearest.py`) have started theirs could
-    hang in the child), or `at_once` when not parallel, not
+    runs a single thread (a fork copies only the calling thread: one taken after MediaPipe or Embree
+    have started theirs could hang in the child), or `at_once` when not parallel, not
     single-threaded, or no core is idle (the worker then only adds its overhead, ~0.7 s of CPU).
     `shared`: called first, here, for what it caches, which both processes need (else each makes it).
     Either way within `memory.settled`; the worker releases what each task leaves (`work.released`)."""

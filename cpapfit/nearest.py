@@ -6,13 +6,41 @@ starts), with the same neighbours and distances (`bench/RESULTS.md` section 2). 
 distance from a query (a subdivided mesh's edge midpoint from the edge's ends) it may keep another
 than scipy's would.
 
-A thread that has queried keeps OpenMP's idle threads for the rest of the process: a process forked
-after that must not query (libgomp's threads are not copied into the child, whose next parallel
-region waits for them); `jobs.worker` forks only a process that runs one thread.
+A thread that has queried keeps OpenMP's idle threads for the rest of the process, and a fork copies
+only the calling thread: in a forked child the thread that forked runs OpenMP on one thread
+(`_one_thread`), whose next parallel region would otherwise wait for ever for threads the child
+does not have; threads started in the child begin OpenMP afresh, on every core.
 """
+
+import ctypes
+import os
+from pathlib import Path
 
 import numpy as np
 from pykdtree.kdtree import KDTree
+
+
+def _libgomps() -> list[ctypes.CDLL]:
+    """The OpenMP runtimes (libgomp) this process has loaded, pykdtree's among them (Linux's
+    /proc/self/maps; none where it cannot tell)."""
+    try:
+        maps = Path("/proc/self/maps").read_text()
+    except OSError:
+        return []
+    paths = sorted({line.split(maxsplit=5)[-1] for line in maps.splitlines() if "libgomp" in line.rsplit("/", 1)[-1]})
+    return [ctypes.CDLL(path) for path in paths]
+
+
+_OPENMP = _libgomps()  # resolved here, not in a forked child, where loading a library could wait on a lock
+
+
+def _one_thread() -> None:
+    """In a forked child: OpenMP on one thread in the thread that forked (the module docstring)."""
+    for lib in _OPENMP:
+        lib.omp_set_num_threads(1)
+
+
+os.register_at_fork(after_in_child=_one_thread)
 
 
 class NearestPoints:

@@ -2,6 +2,9 @@
 normals; its nearest points those a brute-force search finds; and the registration on the shared
 fran scan (3 mm triangles) lying on the scan's real surface."""
 
+import multiprocessing
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -61,6 +64,20 @@ def test_edge_uses_counts_each_edge_once_either_way_round():
         edges, uses = edge_uses(faces.astype(dtype))
         assert [tuple(e) for e in edges.tolist()] == sorted(counted)  # each pair ascending, in ascending order
         assert uses.tolist() == [counted[e] for e in sorted(counted)]  # (0, 1) three times, (1, 2) and (2, 3) twice
+
+
+def _nearest(points: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    return NearestPoints(points).query(queries)[1]
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="finds the OpenMP runtimes in Linux's /proc/self/maps")
+def test_a_process_forked_after_queries_finds_the_same_points():
+    rng = np.random.default_rng(5)
+    points, queries = rng.uniform(-20.0, 20.0, (100_000, 3)), rng.uniform(-25.0, 25.0, (50_000, 3))
+    here = _nearest(points, queries)  # OpenMP's threads started in this thread, which then forks
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        there = pool.apply_async(_nearest, (points, queries)).get(timeout=30)  # waited for ever without `nearest._one_thread`
+    np.testing.assert_array_equal(there, here)
 
 
 def test_nearest_points_are_those_a_brute_force_search_finds():
