@@ -1,6 +1,6 @@
 """The scan as the registration's target: a coarse mesh scan subdivided without cracks, its rims and
-normals; its nearest points those a brute-force search finds; and the registration on the shared
-fran scan (3 mm triangles) lying on the scan's real surface."""
+normals; its nearest points those a brute-force search finds, in a forked process too; and the
+registration on the shared fran scan (3 mm triangles) lying on the scan's real surface."""
 
 import multiprocessing
 from pathlib import Path
