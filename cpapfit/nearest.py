@@ -1,6 +1,6 @@
 """The nearest of a fixed set of 3-D points to each of many others: pykdtree's k-d tree, its queries
 spread over the cores by OpenMP with the GIL released. On the registration's queries (the template's
-28 881 vertices against a 229 291-point scan) it answers in about three quarters of scipy's `cKDTree`
+28 881 vertices against a scan's 229 291) it answers in about three quarters of scipy's `cKDTree`
 time on both cores, and in two thirds with two threads querying at once (the registration's two
 starts), with the same neighbours and distances (`bench/RESULTS.md` section 2). Of points at one
 distance from a query (a subdivided mesh's edge midpoint from the edge's ends) it may keep another
