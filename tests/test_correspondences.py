@@ -44,7 +44,7 @@ def test_a_coarse_scan_made_a_target_keeps_its_rim_and_faces_out():
     mesh = holed_sphere()
     scan = Scan(np.array(mesh.vertices), np.array(mesh.faces), np.array(mesh.vertex_normals))
     target = make_target(scan, use_grid=False, spacing_mm=1.0)
-    vertices, faces = subdivided(scan.vertices, scan.faces, 2.0)
+    vertices, faces = subdivided(scan.vertices, scan.faces, 1.5)
     np.testing.assert_array_equal(target.vertices, vertices)
     np.testing.assert_array_equal(target.boundary, boundary_vertices(vertices, faces))
     np.testing.assert_array_equal(target.normals, _subdivided_normals(scan, vertices, faces))

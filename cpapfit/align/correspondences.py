@@ -18,9 +18,6 @@ from ..rims import boundary_vertices
 from ..scan import Scan
 
 
-TARGET_SPACINGS = 2.0  # a mesh scan's median edge, in template spacings, past which it is subdivided (bench/RESULTS.md section 2)
-
-
 @dataclass(frozen=True)
 class Target:
     """The scan as the registration sees it: vertices (N, 3) mm, unit normals oriented like the
@@ -42,13 +39,11 @@ class Matches:
 
 
 def make_target(scan: Scan, use_grid: bool, spacing_mm: float) -> Target:
-    """The lookup structure for a scan. A mesh scan more than TARGET_SPACINGS times as coarse as the
-    template's `spacing_mm` (median edges) is subdivided until it is not (see `subdivided`), so that
-    its nearest vertex is near its nearest surface point; its rims are found in a thread while its
-    normals are made."""
-    edge_mm = TARGET_SPACINGS * spacing_mm
-    if not scan.is_capture and len(scan.faces) and median_edge(scan.vertices, scan.faces) > edge_mm:
-        vertices, faces = subdivided(scan.vertices, scan.faces, edge_mm)
+    """The lookup structure for a scan. A mesh scan twice as coarse as `spacing_mm` is subdivided
+    first (see `subdivided`), so that its nearest vertex is near its nearest surface point; its rims
+    are found in a thread while its normals are made."""
+    if not scan.is_capture and len(scan.faces) and median_edge(scan.vertices, scan.faces) > 2.0 * spacing_mm:
+        vertices, faces = subdivided(scan.vertices, scan.faces, 1.5 * spacing_mm)
         with ThreadPoolExecutor(max_workers=1) as pool:
             rims = pool.submit(boundary_vertices, vertices, faces)
             normals = _subdivided_normals(scan, vertices, faces)
