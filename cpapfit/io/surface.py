@@ -15,21 +15,21 @@ from ..thresholds import MIN_SHARED_EDGES, MAX_NONMANIFOLD_EDGES, MAX_DEGENERATE
 
 
 
-def check_surface(path: Path, vertices: np.ndarray, faces: np.ndarray, use: np.ndarray) -> None:
-    """Refuse (InputError) triangles of (N, 3) vertices that do not form a surface; `use`: (E,) how
+def check_surface(path: Path, vertices: np.ndarray, faces: np.ndarray, uses: np.ndarray) -> None:
+    """Refuse (InputError) triangles of (N, 3) vertices that do not form a surface; `uses`: (E,) how
     many of them use each of their edges (`rims.edge_uses`)."""
     corners = vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     degenerate = float((area <= DEGENERATE_AREA * np.ptp(vertices, axis=0).max() ** 2).mean())
     if degenerate > MAX_DEGENERATE:
         raise InputError(f"{path}: {100 * degenerate:.0f} % of the triangles have no area (a degenerate mesh); re-export the scan")
-    if (use > 2).mean() > MAX_NONMANIFOLD_EDGES:
+    if (uses > 2).mean() > MAX_NONMANIFOLD_EDGES:
         raise InputError(
-            f"{path}: {100 * (use > 2).mean():.0f} % of the edges join three or more triangles (non-manifold); "
+            f"{path}: {100 * (uses > 2).mean():.0f} % of the edges join three or more triangles (non-manifold); "
             "this is not a single surface: repair the scan (e.g. remove duplicated or overlapping parts)"
         )
-    if (use == 2).mean() < MIN_SHARED_EDGES:
+    if (uses == 2).mean() < MIN_SHARED_EDGES:
         raise InputError(
-            f"{path}: only {100 * (use == 2).mean():.0f} % of the edges join two triangles: the triangles do not form a "
+            f"{path}: only {100 * (uses == 2).mean():.0f} % of the edges join two triangles: the triangles do not form a "
             "surface (random triangles, or every triangle with its own corners: merge duplicate vertices)"
         )
