@@ -13,8 +13,9 @@ each run from a scratch folder with its tree first on PYTHONPATH, and each case'
 their ratios to the other tree's are printed.
 
 With --stages, each case is designed once more with `--verbose` and the wall time of each stage
-the command reports is printed beside the whole (the stages run while a worker process seats the
-stock sizes, so a stage's time is its wall time on a shared machine, not its own cost).
+the command reports is printed beside the whole, with the CPU seconds both its processes used in
+that stage (the stages run while a worker process seats the stock sizes, so a stage's wall time is
+not its own cost; CPU over wall is the cores the stage kept busy, at most 2 here).
 
 Usage: .venv/bin/python bench/design_time.py [--repeat N] [--against DIR | --stages]
 """
@@ -43,12 +44,6 @@ SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 
 def run(*args: str, tree: Path | None = None, cwd: str | None = None) -> tuple[float, float]:
     """(wall seconds, CPU seconds of the run's processes) of `cpapfit ARGS` (`tree`: that source tree first on PYTHONPATH)."""
-    wall, cpu, _ = run_logged(*args, tree=tree, cwd=cwd)
-    return wall, cpu
-
-
-def run_logged(*args: str, tree: Path | None = None, cwd: str | None = None) -> tuple[float, float, str]:
-    """`run`, and what the command wrote on stderr."""
     env = os.environ | {"PYTHONPATH": str(tree)} if tree else None
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -57,15 +52,45 @@ def run_logged(*args: str, tree: Path | None = None, cwd: str | None = None) -> 
         sys.exit(f"cpapfit {' '.join(args)} failed ({done.returncode}): {done.stderr.strip()}")
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), done.stderr
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def stages(name: str, scan: str, mask: str, out: str) -> None:
-    """One `--verbose` design of a case: each stage's wall seconds as the command reports them."""
-    wall, cpu, log = run_logged("design", scan, "--mask", mask, "--out", out, "--verbose")
-    timed = [re.match(r"^  (.+): ([0-9.]+) s$", line) for line in log.splitlines()]
-    shown = ", ".join(f"{m[1]} {float(m[2]):.2f}" for m in timed if m)
-    print(f"  {name} {mask} by stage (s): {shown}; whole {wall:.1f} s, CPU {cpu:.1f} s")
+    """One `--verbose` design of a case: each stage's wall seconds as the command reports them, and
+    the CPU seconds its processes (this one and its worker) used in that stage, read from /proc as
+    each stage's line arrives; start-up: from the process's start to its first stage's (its CPU
+    counted in that stage's)."""
+    t0 = time.perf_counter()
+    done = subprocess.Popen([sys.executable, "-m", "cpapfit", "design", scan, "--mask", mask, "--out", out, "--verbose"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    marks = [(line, tree_cpu(done.pid), time.perf_counter() - t0) for line in done.stderr]
+    if done.wait():
+        sys.exit(f"cpapfit design {scan} failed ({done.returncode}): {''.join(line for line, *_ in marks).strip()}")
+    wall, used, shown = time.perf_counter() - t0, 0.0, []
+    for line, cpu, at in marks:
+        timed = re.match(r"^  (.+): ([0-9.]+) s$", line)
+        if timed:
+            if not shown:
+                shown.append(f"start-up {at - float(timed[2]):.2f}")
+            shown.append(f"{timed[1]} {float(timed[2]):.2f} ({cpu - used:.2f})")
+            used = cpu
+    print(f"  {name} {mask} by stage, wall s (CPU s): {', '.join(shown)}; whole {wall:.1f} s, CPU {used:.1f} s to the last stage's end")
+
+
+def tree_cpu(pid: int) -> float:
+    """CPU seconds (user + system) process `pid` and its children have used so far, reaped ones
+    included (Linux /proc)."""
+    total = 0
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        if stat.parent.name == str(pid):
+            total += sum(int(f) for f in fields[11:15])
+        elif int(fields[1]) == pid:
+            total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
 
 
 def dense_mesh(path: Path) -> None:
