@@ -26,7 +26,7 @@ from .errors import InputError, NoStockSeat
 from .evaluation.fit import CushionFit, Face, FitParams, at_force, fit_rim
 from .evaluation.rim import RimZone, in_plane, refined, rim_in, rim_zone
 from .evaluation.states import FaceState, StateFit, fit_states, merged, sleep_states
-from .work import Shared, at_once
+from .work import Again, Shared, at_once
 
 COMFORT_N = 10.0  # the most headgear force a clinic sets for comfort
 MARGIN = 1.1  # the straps are set this much above the force that just seals
@@ -144,7 +144,7 @@ def fitting_stock(mask: str, face: Face, choice: str = "best", params: CushionPa
     "gauge" (the size the gauge picks) or "best" (every size, the best kept)."""
     gauge = gauge_size(mask, np.asarray(face.registered.vertices))
     sizes = SIZES[mask] if choice == "best" else (gauge if choice == "gauge" else choice,)
-    seats = Shared(submit, seated, [(mask, size, face, params, fit_params) for size in sizes])
+    seats = Shared(submit, seat_step, [(mask, size, face, params, fit_params) for size in sizes])
     return StockFitting(mask, face, gauge, tuple(sizes), seats, params, fit_params, submit)
 
 
@@ -175,28 +175,40 @@ def seated(mask: str, size: str, face: Face, params: CushionParams = CushionPara
            fit_params: FitParams = FitParams()) -> StockFit | None:
     """The stock `size` at its best seat on `face` (module docstring); None where at no seat tried
     is its rim found (`rim_in`: its wall does not run all the way round the mask axis over the face,
-    as a size too large for it, or lies over too little scanned skin)."""
-    mesh, thickness = _refined_stock(mask, size, params)
-    zone = rim_zone(_placed(mesh, face, np.zeros(2)), face.axis, face.up, thickness)  # every seat's, moved across the axis
-    tried = {}
+    as a size too large for it, or lies over too little scanned skin). Each of SEAT_STEPS_MM is a
+    `seat_step`."""
+    found = seat_step(mask, size, face, params, fit_params)
+    while isinstance(found, Again):
+        found = seat_step(mask, size, face, params, fit_params, *found.args)
+    return found
 
-    def at(offset: np.ndarray) -> StockFit | None:
-        key = tuple(np.round(offset, 6))
-        if key not in tried:
-            try:
-                tried[key] = _pressed(size, zone, face, offset, params, fit_params)
-            except InputError:  # no rim over the face from here: no seat
-                tried[key] = None
-        return tried[key]
 
-    best, centre = None, np.zeros(2)
-    for step in SEAT_STEPS_MM:
-        for trial in filter(None, (at(offset) for offset in centre + step * GRID)):
-            best = trial if best is None or trial.rank() < best.rank() else best
-        if best is None:
-            return None
-        centre = np.asarray(best.offset_mm)
-    return best
+def seat_step(mask: str, size: str, face: Face, params: CushionParams, fit_params: FitParams, zone: RimZone | None = None,
+              steps: tuple[float, ...] = SEAT_STEPS_MM, best: StockFit | None = None) -> StockFit | None | Again:
+    """One step of `seated`: the seats of the grid steps[0] mm apart about the best seat so far
+    (`best`, not pressed again; the nasal bridge to begin), then, while steps remain, the next step
+    as `Again` (`work.Shared` hands it to whichever process is free); else the best seat (None
+    where none found its rim). `zone`: the size's `RimZone` on the nasal bridge (made here to begin)."""
+    if zone is None:
+        mesh, thickness = _refined_stock(mask, size, params)
+        zone = rim_zone(_placed(mesh, face, np.zeros(2)), face.axis, face.up, thickness)  # every seat's, moved across the axis
+    centre = np.zeros(2) if best is None else np.asarray(best.offset_mm)
+    grid = centre + steps[0] * GRID
+    for offset in grid if best is None else grid[(grid != centre).any(axis=1)]:
+        trial = _seat(size, zone, face, offset, params, fit_params)
+        if trial is not None and (best is None or trial.rank() < best.rank()):
+            best = trial
+    if best is None or len(steps) == 1:
+        return best
+    return Again((zone, steps[1:], best))
+
+
+def _seat(size: str, zone: RimZone, face: Face, offset: np.ndarray, params: CushionParams, fit_params: FitParams) -> StockFit | None:
+    """`_pressed`, or None where no rim over the face is found from this seat."""
+    try:
+        return _pressed(size, zone, face, offset, params, fit_params)
+    except InputError:
+        return None
 
 
 def stock_solids(mask: str, choice: str = "best", params: CushionParams = CushionParams()) -> None:

@@ -3,6 +3,8 @@ Either way a future whose result() is fn(*args), so stages run the same with and
 
 import threading
 from concurrent.futures import Future
+from dataclasses import dataclass
+from functools import partial
 
 from .memory import release
 
@@ -33,39 +35,71 @@ def ahead(submit, fn, *args) -> None:
         submit(fn, *args)
 
 
+@dataclass(frozen=True)
+class Again:
+    """What a job of `Shared` returns when it is not done: its fn is to be called again, with the
+    job's own args followed by `args`, by whichever of the two processes is free first."""
+
+    args: tuple
+
+
 class Shared:
     """fn(*args) for each of `jobs`, shared between `submit`'s worker and this process: the worker
     is handed them one at a time from the first, each when its last is done (a process pool queues
     ahead what it is handed, where it can no longer be taken back), and `results` does here the
-    ones not yet handed out, from the last."""
+    ones not yet handed out, from the last. A job that returns `Again` goes on as a step queued
+    last: the worker takes the others' first steps first, this process the later steps, so that
+    the two finish together to within a step rather than a whole job."""
 
     def __init__(self, submit, fn, jobs):
-        self._submit, self._fn = submit, fn
-        self._todo = list(enumerate(jobs))
-        self._handed: dict[int, Future] = {}
-        self._here: dict[int, object] = {}
-        self._lock = threading.Lock()
+        self._submit, self._fn, self._count = submit, fn, len(jobs)
+        self._todo = [(i, tuple(args)) for i, args in enumerate(jobs)]  # (job number, its args and what its steps passed on)
+        self._done: dict[int, Future] = {}
+        self._handed = False  # the worker has a step, not yet back
+        self._cond = threading.Condition()
         self._hand_on()
 
-    def _hand_on(self, _done: Future | None = None) -> None:
-        """Hand the worker the first job not yet begun (called again as each it was handed is done)."""
-        with self._lock:
-            if not self._todo:
+    def _hand_on(self) -> None:
+        """Hand the worker the first step not yet begun, unless it has one."""
+        with self._cond:
+            if self._handed or not self._todo:
                 return
             i, args = self._todo.pop(0)
-            try:
-                self._handed[i] = future = self._submit(self._fn, *args)
-            except Exception:  # no worker to take it (a broken pool): `results` does it here
+            self._handed = True
+        try:
+            future = self._submit(self._fn, *args)
+        except Exception:  # no worker to take it (a broken pool): `results` does it here
+            with self._cond:
                 self._todo.insert(0, (i, args))
-                return
-        future.add_done_callback(self._hand_on)
+                self._handed = False
+                self._cond.notify_all()
+            return
+        future.add_done_callback(partial(self._back, i, args))
+
+    def _back(self, i: int, args: tuple, future: Future) -> None:
+        """The worker's step of job `i` (`args`) done: kept, or its next step queued; the worker handed on."""
+        with self._cond:
+            self._handed = False
+            self._settle(i, args, future)
+        self._hand_on()
+
+    def _settle(self, i: int, args: tuple, future: Future) -> None:
+        """Job `i`'s step (`args`) done as `future`: its result, or (`Again`) its next step queued last."""
+        with self._cond:
+            more = None if future.cancelled() or future.exception() is not None else future.result()
+            if isinstance(more, Again):
+                self._todo.append((i, args + more.args))
+            else:
+                self._done[i] = future
+            self._cond.notify_all()
 
     def results(self) -> list:
         """Every job's fn(*args), in order; the worker's exceptions are raised here."""
         while True:
-            with self._lock:
+            with self._cond:
+                self._cond.wait_for(lambda: self._todo or not self._handed)
                 if not self._todo:
                     break
                 i, args = self._todo.pop()
-            self._here[i] = self._fn(*args)
-        return [self._here[i] if i in self._here else self._handed[i].result() for i in range(len(self._here) + len(self._handed))]
+            self._settle(i, args, at_once(self._fn, *args))
+        return [self._done[i].result() for i in range(self._count)]

@@ -1,5 +1,7 @@
 """Stock cushions: sizes spanning the population, a real membrane, the gauge, and a clinic's seating."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import trimesh
@@ -16,7 +18,8 @@ from cpapfit.evaluation.membrane import MEMBRANE_MAX_MM, face_thickness_mm, reac
 from cpapfit.evaluation.states import CPAP_RANGE_CMH2O
 from cpapfit.errors import InputError
 from cpapfit.report.page import cushion_label, settings_line
-from cpapfit.stock_fit import COMFORT_N, MARGIN, SEAT_STEPS_MM, _placed, _refined_stock, compared_stock, gauge_size, seated
+from cpapfit import stock_fit
+from cpapfit.stock_fit import COMFORT_N, GRID, MARGIN, SEAT_STEPS_MM, _placed, _refined_stock, compared_stock, gauge_size, seated
 from cpapfit.template import load_template
 
 
@@ -103,6 +106,30 @@ def test_the_size_made_on_a_face_seats_on_its_bridge_and_seals_within_comfort():
     assert summary["rim_covered_fraction"] == 1.0
     rim = fit.fit.rim
     assert np.median(reach_mm(rim.membrane_mm, rim.membrane_thickness_mm, CPAP_RANGE_CMH2O[0] * KPA_PER_CMH2O)) >= SLACK_MM - 0.5
+
+
+def test_the_seats_tried_are_the_bridge_grid_then_the_finer_grid_about_its_best(monkeypatch):
+    """`seated`'s steps (`seat_step`, each of which a worker or this process may take): the 3 x 3
+    seats SEAT_STEPS_MM[0] apart about the nasal bridge, then the 8 new ones SEAT_STEPS_MM[1] apart
+    about the best of those, each pressed once; the best seat by rank, seats with no rim left out.
+    Pressing is stood in for by a rank that falls towards (1.2, -2.9) mm, no rim left of -1.5 mm."""
+    pressed = []
+
+    def press(size, zone, face, offset, params, fit_params):
+        pressed.append(tuple(offset))
+        if offset[0] < -1.5:
+            raise InputError("no rim over the face from here")
+        return SimpleNamespace(offset_mm=tuple(offset), rank=lambda: (0, (offset[0] - 1.2) ** 2 + (offset[1] + 2.9) ** 2))
+
+    monkeypatch.setattr(stock_fit, "_pressed", press)
+    monkeypatch.setattr(stock_fit, "_refined_stock", lambda mask, size, params: (None, None))
+    monkeypatch.setattr(stock_fit, "_placed", lambda mesh, face, offset: None)
+    monkeypatch.setattr(stock_fit, "rim_zone", lambda *args: "zone")
+    best = seated("nasal", "M", SimpleNamespace(axis=None, up=None))
+    coarse = SEAT_STEPS_MM[0] * GRID
+    fine = coarse[2] + SEAT_STEPS_MM[1] * GRID  # about (2, -2), the best of the coarse grid
+    assert pressed == [tuple(o) for o in coarse] + [tuple(o) for o in fine if tuple(o) != tuple(coarse[2])]
+    assert best.offset_mm == (1.0, -3.0)
 
 
 def test_a_size_too_large_for_the_face_has_no_seat_and_is_named():

@@ -14,7 +14,7 @@ import trimesh
 from cpapfit.evaluation.fit import Face
 from cpapfit.io import load_scan
 from cpapfit.pipeline import design
-from cpapfit.work import Shared, at_once
+from cpapfit.work import Again, Shared, at_once
 
 
 def _job(seconds: float, value: int) -> tuple[int, int]:
@@ -58,6 +58,35 @@ def test_shared_work_at_once_is_done_in_order_as_it_is_made():
     shared = Shared(at_once, lambda v: done.append(v) or -v, [(v,) for v in range(3)])
     assert done == [0, 1, 2]
     assert shared.results() == shared.results() == [0, -1, -2]
+
+
+def _stepped(order: list | None, value: int, seconds: float, *steps: int):
+    """A job of two steps: the first (`seconds` asleep) says `Again` with the pid that did it; the
+    second returns (value squared, both steps' pids). Each step is noted in `order` (at once)."""
+    if order is not None:
+        order.append((value, len(steps)))
+    if not steps:
+        time.sleep(seconds)
+        return Again((os.getpid(),))
+    return value * value, steps[0], os.getpid()
+
+
+def test_shared_work_in_steps_takes_every_first_step_before_any_next():
+    order = []
+    out = Shared(at_once, _stepped, [(order, v, 0.0) for v in range(3)]).results()
+    assert order == [(0, 0), (1, 0), (2, 0), (0, 1), (1, 1), (2, 1)]
+    assert out == [(v * v, os.getpid(), os.getpid()) for v in range(3)]
+
+
+def test_shared_work_in_steps_between_the_worker_and_this_process():
+    """Each job's steps done once, by either process, its result the last step's; the worker's
+    first step outlasts this process's three, whose next steps this process takes at once."""
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
+        pool.submit(int).result()
+        out = Shared(pool.submit, _stepped, [(None, 0, 1.0)] + [(None, v, 0.0) for v in (1, 2, 3)]).results()
+    assert [value for value, *_ in out] == [0, 1, 4, 9]
+    assert out[0][1] != os.getpid()
+    assert [o[1:] for o in out[1:]] == [(os.getpid(), os.getpid())] * 3
 
 
 def test_a_face_goes_to_a_worker_as_its_arrays_not_its_meshes_caches():
