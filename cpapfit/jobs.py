@@ -98,8 +98,8 @@ def design_job(
     on_stage: Callable[[str], None] = _silent, parallel: bool = False, stock: str | None = "best",
 ) -> tuple[DesignRun, dict[str, bytes]]:
     """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
-    files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes and some report pictures made in a second
-    process (`worker`; the stock family's population, which both processes need, made first). What a
+    files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes, the solids' files (checked as read back)
+    and some report pictures made in a second process (`worker`; the stock family's population, which both processes need, made first). What a
     stage leaves is released as the next starts (`memory.release`). The report is imported before the
     worker is forked, so that both processes have it (and it is frozen with the rest, `memory.settled`)."""
     import_module(".report.assemble", __package__)  # imported where used by `outputs`, which `register` never uses
@@ -107,8 +107,10 @@ def design_job(
     with worker(parallel, population if stock else None) as submit:
         on_stage("reading the scan")
         scan = load_scan(Path(scan_path), units)
-        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock)
-        solids = submit(solid_files, d.solid, d.mould_parts, d.frame.mesh)  # checked while the report is drawn
+        handed = []  # the solids' files, checked while the best stock size is pressed asleep and the report drawn
+        d = design(scan, mask, user_landmarks(landmarks_path, scan), on_stage=on_stage, submit=submit, stock=stock,
+                   solids_made=lambda *solids: handed.append(submit(solid_files, *solids)))
+        solids = handed[0] if handed else submit(solid_files, d.solid, d.mould_parts, d.frame.mesh)
         if solids.done():
             solids.result()  # checked already (no worker): a solid that fails stops the design here
         records = record_files(d, scan)

@@ -213,6 +213,7 @@ def design(
     fit_params: FitParams = FitParams(), on_stage: Callable[[str], None] = _silent, submit=at_once,
     placement: Placement | None = None, stock: str | None = "best", quality: QualityParams = QualityParams(),
     registration: NonrigidParams = NonrigidParams(), landmark_noise: LandmarkNoise = LandmarkNoise(),
+    solids_made: Callable[[trimesh.Trimesh, dict, trimesh.Trimesh], None] = lambda *solids: None,
 ) -> Design:
     """Scan to checked printable cushion and its evaluation: align, register, carry the seal over,
     design with a pressure-compensating pre-load, thicken, check, mould, then press the custom
@@ -223,7 +224,10 @@ def design(
     `quality`: the gates' thresholds; `registration`: the nonrigid registration's parameters;
     `landmark_noise`: noise on the detected landmarks (none by default).
     `placement`: the template already placed on this scan (`place_template`, which is mask-free: one
-    placement serves both masks), else placed here from `user_landmarks` or detection."""
+    placement serves both masks), else placed here from `user_landmarks` or detection.
+    `solids_made(solid, mould parts, frame mesh)` is called while the best stock size is pressed
+    asleep (`StockFitting.comparison`'s `meanwhile`), for work on the custom solids that `submit`'s
+    worker would otherwise wait through."""
     if stock:
         ahead(submit, stock_solids, mask, stock, params)
     placement = placement or place_template(scan, user_landmarks, on_stage, registration, quality, landmark_noise)
@@ -253,7 +257,7 @@ def design(
     if fitting is not None:
         on_stage("the stock cushion a clinic would fit")
         try:
-            compared = fitting.comparison(faces=asleep)
+            compared = fitting.comparison(faces=asleep, meanwhile=lambda: solids_made(solid, moulded.parts, frame.mesh))
         except NoStockSeat as exc:  # the custom design stands, compared with none
             unfitted = str(exc)
         else:

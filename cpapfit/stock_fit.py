@@ -117,10 +117,13 @@ class StockFitting:
     fit_params: FitParams
     submit: Callable
 
-    def comparison(self, asleep: bool = True, faces: dict[FaceState, Face] | None = None) -> StockComparison:
+    def comparison(self, asleep: bool = True, faces: dict[FaceState, Face] | None = None,
+                   meanwhile: Callable[[], None] = lambda: None) -> StockComparison:
         """The `StockComparison`; `asleep`: the best size (and the gauge's) pressed in each sleep state
         too, on `faces` where already made (`state_faces`: the custom cushion's, on a mesh scan
-        hundreds of MB each; the gauge's size, pressed by a worker, on faces of its own)."""
+        hundreds of MB each; the gauge's size, pressed by a worker, on faces of its own).
+        `meanwhile()` is called once the sizes are seated and the gauge's states handed out, before
+        the best's are pressed here: work to hand the worker, which would otherwise wait."""
         mask, face, params, fit_params = self.mask, self.face, self.params, self.fit_params
         done = dict(zip(self.sizes, self.seats.results()))
         sizes = tuple(sorted((fit for fit in done.values() if fit is not None), key=StockFit.rank))
@@ -134,6 +137,7 @@ class StockFitting:
             return compared
         here = faces if self.submit is at_once else None  # a worker makes its own, sharing their triangles as this process's do
         gauge_states = self.submit(stock_states, mask, gauge_fit, face, params, fit_params, "stock_gauge", here) if gauge_fit else None
+        meanwhile()
         return replace(compared, states=stock_states(mask, sizes[0], face, params, fit_params, faces=faces),
                        gauge_states=gauge_states.result() if gauge_states else ())
 

@@ -246,7 +246,7 @@ def test_a_face_no_stock_size_seats_on_is_designed_and_says_so(cli, tmp_path, ph
     fit.json (valid) and the report saying why no stock cushion is compared, the summary line too."""
     import cpapfit.stock_fit as stock_fit
 
-    monkeypatch.setattr(stock_fit, "seated", lambda *args, **kwargs: None)
+    monkeypatch.setattr(stock_fit, "seat_step", lambda *args, **kwargs: None)
     out = tmp_path / "out"
     code, _, err = cli("design", phantom1_dir, "--mask", "nasal", "--stock", "gauge", "--out", out)
     assert code == 0, err

@@ -172,7 +172,8 @@ def test_with_no_worker_the_stock_sizes_press_on_the_faces_already_made(monkeypa
     """Asleep, with no worker (`at_once`), the best size and the gauge's both press on the sleep-state
     faces handed in (on a dense scan each moved face is hundreds of MB): no state face is made again,
     and every state reads the same as on faces made anew (the ICT mean face 10 % taller, whose
-    gauge size is not its best)."""
+    gauge size is not its best). The work handed out `meanwhile` is called once, after the gauge's
+    states are handed out and before the best's are pressed."""
     from cpapfit.evaluation import states
     from cpapfit.stock_fit import fitting_stock
 
@@ -181,7 +182,10 @@ def test_with_no_worker_the_stock_sizes_press_on_the_faces_already_made(monkeypa
     made, make = [], states.state_face
     monkeypatch.setattr(states, "state_face", lambda *args: made.append(1) or make(*args))
     fitting = fitting_stock("nasal", face)  # its sizes seated once, for both comparisons
-    handed = fitting.comparison(faces=asleep)
+    order, press = [], stock_fit.stock_states
+    monkeypatch.setattr(stock_fit, "stock_states", lambda *args, **kw: order.append(args[5] if len(args) > 5 else "stock") or press(*args, **kw))
+    handed = fitting.comparison(faces=asleep, meanwhile=lambda: order.append("meanwhile"))
+    assert order == ["stock_gauge", "meanwhile", "stock"]
     assert made == [] and handed.states and handed.gauge_states
     anew = fitting.comparison()
     assert made
