@@ -98,8 +98,9 @@ def design_job(
     on_stage: Callable[[str], None] = _silent, parallel: bool = False, stock: str | None = "best",
 ) -> tuple[DesignRun, dict[str, bytes]]:
     """`cpapfit design`: read the scan (and landmarks), design, build the report; the run and its
-    files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the stock sizes, the solids' files (checked as read back)
-    and some report pictures made in a second process (`worker`; the stock family's population, which both processes need, made first). What a
+    files {name: bytes} (with fused_scan.ply for a sweep or a RealSense recording). `parallel`: the
+    stock sizes, the solids' files (checked as read back) and some report pictures made in a second
+    process (`worker`; the stock family's population, which both processes need, made first). What a
     stage leaves is released as the next starts (`memory.release`). The report is imported before the
     worker is forked, so that both processes have it (and it is frozen with the rest, `memory.settled`)."""
     import_module(".report.assemble", __package__)  # imported where used by `outputs`, which `register` never uses
