@@ -1,5 +1,5 @@
 """The registration's sparse factorisations, by each solver at hand, on the template's own level
-matrices: what `align/system.py` factorises (CHOLMOD through cvxopt) against the others tried.
+matrices: what `align/system.py` factorises (CHOLMOD, `align/cholmod.py`) against the others tried.
 
 The matrices: the 28 881-vertex template's membrane Laplacian, its 468 landmark vertices pulled at
 the detected landmarks' tenth of the paper's weight, its mirror pairs across and along a plane
@@ -25,7 +25,7 @@ from scipy.sparse.linalg import splu
 from cpapfit.align.laplacian import laplacian
 from cpapfit.align.nonrigid import NonrigidParams, _stiffness
 from cpapfit.align.symmetry import mirror_pairs
-from cpapfit.align.system import Cholesky
+from cpapfit.align.cholmod import Cholesky
 from cpapfit.template import N_LANDMARKS, load_template
 
 
@@ -101,7 +101,7 @@ def main() -> None:
                            params.detected_landmark_factor, params)
     levels = [stiffness.matrices(level) for level in (0, 1)]
     rhs = np.random.default_rng(0).normal(size=(len(template.vertices), 3))
-    solvers = {"CHOLMOD (cvxopt, cpapfit's)": lambda: Cholesky, "SuperLU (scipy)": lambda: SuperLU, "QDLDL": qdldl_solver,
+    solvers = {"CHOLMOD (cpapfit's)": lambda: Cholesky, "SuperLU (scipy)": lambda: SuperLU, "QDLDL": qdldl_solver,
                "feral": feral_solver}
     print("| solver | matrix | factorise (s) | refactorise (s) | solve x, y, z (s) | residual |")
     print("|---|---|---|---|---|---|")

@@ -313,8 +313,8 @@ def _stiffness(lap: csr_matrix, mirror: MirrorPairs | MirrorTerm | None, lm_inde
 def _elastic_runs(aligned: np.ndarray, faces: np.ndarray, setups: list, landmarks: tuple, factor: float,
                   params: NonrigidParams, factors: SharedFactors) -> list[tuple[_Setup, Registration]]:
     """The elastic ICP (its set-up and result) of each of `setups` (callables making a `_Setup`), each in a
-    thread of its own, the runs solving with the `factors` made for them (the k-d tree queries and
-    numpy's larger operations release the GIL)."""
+    thread of its own, the runs solving with the `factors` made for them (CHOLMOD, the k-d tree
+    queries and numpy's larger operations release the GIL)."""
 
     def run(number: int) -> tuple[_Setup, Registration]:
         try:

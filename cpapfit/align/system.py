@@ -15,9 +15,9 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
-from cvxopt import cholmod, matrix, spmatrix
-from scipy.sparse import csc_matrix, csr_matrix, diags
+from scipy.sparse import csr_matrix, diags
 
+from .cholmod import Cholesky
 from .symmetry import MirrorTerm
 
 
@@ -113,48 +113,6 @@ class SharedFactors:
         if not passed:
             return None
         return self.levels.pop(min(passed, key=lambda k: k >= min(self.position))).result()
-
-
-class Cholesky:
-    """CHOLMOD's supernodal Cholesky factorisation (through cvxopt, which asks CHOLMOD for its
-    supernodal method) of a sparse symmetric positive definite (n, n) matrix: its symbolic analysis
-    made once and kept when it is refactorised for another matrix of the same pattern (`update`)."""
-
-    def __init__(self, a: csc_matrix):
-        lower = _lower(a)
-        self.pattern = _pattern(lower)
-        self.factor = cholmod.symbolic(lower)
-        cholmod.numeric(lower, self.factor)
-
-    def update(self, a: csc_matrix) -> None:
-        """Refactorised for `a`; ValueError if its pattern is not the pattern it was made for (CHOLMOD
-        would leave out the entries outside it without a word)."""
-        lower = _lower(a)
-        if not all(np.array_equal(p, q) for p, q in zip(_pattern(lower), self.pattern)):
-            raise ValueError("a factorisation refactorised for a matrix of another sparsity pattern")
-        cholmod.numeric(lower, self.factor)
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """The solution of A X = rhs for an (n,) or (n, k) right-hand side, of its shape."""
-        x = matrix(np.asarray(rhs, dtype=np.float64).reshape(len(rhs), -1))
-        cholmod.solve(self.factor, x)
-        return np.array(x).reshape(rhs.shape)
-
-
-def _lower(a: csc_matrix) -> spmatrix:
-    """The lower triangle of a sparse (n, n) matrix (duplicates summed, explicit zeros kept in the
-    pattern) as cvxopt's, the triangle CHOLMOD reads."""
-    a = csc_matrix(a)
-    col = np.repeat(np.arange(a.shape[1]), np.diff(a.indptr))
-    keep = a.indices >= col
-    values, rows, cols = matrix(a.data[keep].astype(np.float64)), matrix(a.indices[keep].astype(np.int_)), matrix(col[keep])
-    return spmatrix(values, rows, cols, size=a.shape)
-
-
-def _pattern(lower: spmatrix) -> tuple[np.ndarray, np.ndarray]:
-    """A cvxopt sparse matrix's pattern: its column pointers and row indices."""
-    colptr, rows, _ = lower.CCS
-    return np.array(colptr), np.array(rows)
 
 
 def _factorised(matrices: list, spare: list | None) -> list:
