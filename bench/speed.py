@@ -147,22 +147,20 @@ def amberg(aligned: np.ndarray, scan, index: np.ndarray, points: np.ndarray) -> 
     return np.asarray(vertices), clock.read()
 
 
-def placed_repeatedly(scan, repeat: int):
-    """`placed` `repeat` times: (placement, whole (wall, CPU) s, registration stage (wall, CPU) s, its
-    runs' wall s), the times the median run's by the stage's wall, and each run's stage wall s;
-    every run's registered vertices the same to the bit (AssertionError otherwise)."""
+def placed_repeatedly(scan, repeat: int) -> tuple[tuple, list[float]]:
+    """`placed` run `repeat` times: the run whose registration stage took the median wall time, and
+    each run's stage wall s; AssertionError if two runs register the scan to other vertices."""
     tries = [placed(scan) for _ in range(repeat)]
     if not all(np.array_equal(t[0].registration.vertices, tries[0][0].registration.vertices) for t in tries):
         raise AssertionError("the same scan registered twice to other vertices")
     walls = [t[2][0] for t in tries]
-    median = tries[int(np.argsort(walls)[len(walls) // 2])]
-    return tries[0][0], median[1], median[2], median[3], walls
+    return tries[int(np.argsort(walls)[len(walls) // 2])], walls
 
 
 def compare(name: str, scan, truth: np.ndarray | None, repeat: int) -> None:
     print(f"\n{name}: scan {len(scan.vertices)} vertices, {len(scan.faces)} triangles ({scan.units_note}); load {os.getloadavg()[0]:.2f}")
     clock = Clock()
-    placement, whole, stage, runs, walls = placed_repeatedly(scan, repeat)
+    (placement, whole, stage, runs), walls = placed_repeatedly(scan, repeat)
     al, reg = placement.alignment, placement.registration
     aligned = al.similarity.apply(TEMPLATE.vertices)  # as `register_template` starts from it
     index, points = _landmark_targets(al.landmarks, NonrigidParams())
