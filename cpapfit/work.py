@@ -52,8 +52,8 @@ class Shared:
     the two finish together to within a step rather than a whole job."""
 
     def __init__(self, submit, fn, jobs):
-        self._submit, self._fn, self._count = submit, fn, len(jobs)
-        self._todo = [(i, tuple(args)) for i, args in enumerate(jobs)]  # (job number, its args and what its steps passed on)
+        self._submit, self._fn, self._jobs = submit, fn, [tuple(args) for args in jobs]
+        self._todo = list(enumerate(self._jobs))  # (job number, its step's args: the job's own, then its last `Again`'s)
         self._done: dict[int, Future] = {}
         self._handed = False  # the worker has a step, not yet back
         self._cond = threading.Condition()
@@ -74,21 +74,22 @@ class Shared:
                 self._handed = False
                 self._cond.notify_all()
             return
-        future.add_done_callback(partial(self._back, i, args))
+        future.add_done_callback(partial(self._back, i))
 
-    def _back(self, i: int, args: tuple, future: Future) -> None:
-        """The worker's step of job `i` (`args`) done: kept, or its next step queued; the worker handed on."""
+    def _back(self, i: int, future: Future) -> None:
+        """The worker's step of job `i` done: kept, or its next step queued; the worker handed on."""
         with self._cond:
             self._handed = False
-            self._settle(i, args, future)
+            self._settle(i, future)
         self._hand_on()
 
-    def _settle(self, i: int, args: tuple, future: Future) -> None:
-        """Job `i`'s step (`args`) done as `future`: its result, or (`Again`) its next step queued last."""
+    def _settle(self, i: int, future: Future) -> None:
+        """Job `i`'s step done as `future`: its result, or (`Again`) its next step queued last, with the
+        job's own args followed by the `Again`'s."""
         with self._cond:
             more = None if future.cancelled() or future.exception() is not None else future.result()
             if isinstance(more, Again):
-                self._todo.append((i, args + more.args))
+                self._todo.append((i, self._jobs[i] + more.args))
             else:
                 self._done[i] = future
             self._cond.notify_all()
@@ -101,5 +102,5 @@ class Shared:
                 if not self._todo:
                     break
                 i, args = self._todo.pop()
-            self._settle(i, args, at_once(self._fn, *args))
-        return [self._done[i].result() for i in range(self._count)]
+            self._settle(i, at_once(self._fn, *args))
+        return [self._done[i].result() for i in range(len(self._jobs))]

@@ -78,6 +78,16 @@ def test_shared_work_in_steps_takes_every_first_step_before_any_next():
     assert out == [(v * v, os.getpid(), os.getpid()) for v in range(3)]
 
 
+def test_a_step_gets_the_jobs_own_args_and_the_last_agains_only():
+    """A job of three steps: each step after the first is called with the job's args followed by the
+    args of the `Again` the step before it returned, not those of every earlier step."""
+
+    def three(value: int, *passed: int):
+        return Again((len(passed) + 1,)) if passed in ((), (1,)) else (value, passed)
+
+    assert Shared(at_once, three, [(v,) for v in range(3)]).results() == [(v, (2,)) for v in range(3)]
+
+
 def test_shared_work_in_steps_between_the_worker_and_this_process():
     """Each job's steps done once, by either process, its result the last step's; the worker's
     first step outlasts this process's three, whose next steps this process takes at once."""
